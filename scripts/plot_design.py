@@ -71,7 +71,12 @@ class Report:
         except OSError as e:
             raise ReportError("%s: cannot read: %s" % (path, e.strerror or e))
         except yaml.YAMLError as e:
-            msg = " ".join(str(e).split())
+            mark = getattr(e, "problem_mark", None)
+            problem = getattr(e, "problem", None)
+            if mark is not None and problem:
+                msg = "line %d, column %d: %s" % (mark.line + 1, mark.column + 1, problem)
+            else:
+                msg = " ".join(str(e).split())
             raise ReportError("%s: cannot parse as YAML: %s" % (path, msg))
         if not isinstance(data, dict):
             raise ReportError("%s: not a stereo design report (top level is not a mapping)" % path)
@@ -365,12 +370,20 @@ def plot_fields_of_view(rep, grid, out_dir, quiet):
     z_lo = min(z_vals) - 0.08 * Z
     z_hi = 1.2 * Z
 
-    h_top, h_bot = (y_hi - y_lo), (z_hi - z_lo)
-    fig = plt.figure(figsize=(12.5, 4.0 + 7.0 * (h_top + h_bot) / (x_hi - x_lo)))
-    gs = fig.add_gridspec(2, 1, height_ratios=[h_top, h_bot], hspace=0.35)
-    ax = fig.add_subplot(gs[0])
-    ax_s = fig.add_subplot(gs[1])
-    fig.suptitle("%s\nFields of view on the working plane z = %.4g mm" % (name, Z), fontsize=11)
+    # Explicit layout (inches): both panels share the x scale and keep equal aspect.
+    ax_w = 7.5
+    mm_per_in = (x_hi - x_lo) / ax_w
+    min_side_in = 2.6  # room for the side view's legend
+    if (z_hi - z_lo) / mm_per_in < min_side_in:
+        z_hi = z_lo + min_side_in * mm_per_in
+    h_top, h_bot = (y_hi - y_lo) / mm_per_in, (z_hi - z_lo) / mm_per_in
+    m_left, m_right, m_top, m_gap, m_bottom = 0.9, 3.9, 1.0, 0.95, 0.6
+    fig_w, fig_h = m_left + ax_w + m_right, m_top + h_top + m_gap + h_bot + m_bottom
+    fig = plt.figure(figsize=(fig_w, fig_h))
+    ax = fig.add_axes([m_left / fig_w, (m_bottom + h_bot + m_gap) / fig_h, ax_w / fig_w, h_top / fig_h])
+    ax_s = fig.add_axes([m_left / fig_w, m_bottom / fig_h, ax_w / fig_w, h_bot / fig_h])
+    fig.suptitle("%s\nFields of view on the working plane z = %.4g mm" % (name, Z), fontsize=11,
+                 y=1.0 - 0.15 / fig_h, va="top")
 
     # -- plan view on the working plane
     add_polygon(ax, overlap, fc=OVERLAP_COLOUR, ec=OVERLAP_COLOUR, alpha=0.3, lw=1.0,
@@ -394,7 +407,7 @@ def plot_fields_of_view(rep, grid, out_dir, quiet):
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8.5, borderaxespad=0)
 
-    # -- x-z view of the rig (from above: y is down, so this looks along -y... i.e. onto x-z)
+    # -- x-z view of the rig (seen from above, i.e. looking along +y)
     ax_s.axhline(Z, color="0.35", lw=1.5, label="working plane z = %.4g mm" % Z)
     dof_labelled = False
     for side, colour in (("left", LEFT_COLOUR), ("right", RIGHT_COLOUR)):
@@ -432,7 +445,6 @@ def plot_fields_of_view(rep, grid, out_dir, quiet):
     ax_s.grid(True, alpha=0.3)
     ax_s.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8.5, borderaxespad=0)
 
-    fig.subplots_adjust(left=0.08, right=0.68, top=0.9, bottom=0.07)
     save(fig, out_dir, "fields_of_view.png", quiet)
 
 
@@ -445,9 +457,16 @@ def plot_projected_grid(rep, grid, out_dir, quiet):
     H = rep.number("input.height_px")
     pts = grid["point"]
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 0.5 + 6.0 * H / W + 1.3))
-    fig.suptitle("%s\nGrid points as the cameras see them (%d points, image %d × %d px)"
-                 % (name, len(pts), W, H), fontsize=11)
+    ax_w = 6.0
+    ax_h = ax_w * H / W  # same 4 % margins on u and v keep this ratio
+    m_left, m_mid, m_right, m_top, m_bottom = 0.9, 0.9, 0.3, 0.9, 0.65
+    fig_w, fig_h = m_left + 2 * ax_w + m_mid + m_right, m_top + ax_h + m_bottom
+    fig = plt.figure(figsize=(fig_w, fig_h))
+    axes = [fig.add_axes([(m_left + k * (ax_w + m_mid)) / fig_w, m_bottom / fig_h,
+                          ax_w / fig_w, ax_h / fig_h]) for k in (0, 1)]
+    fig.suptitle("%s\nGrid points as the cameras see them (%d points, image %d × %d px, "
+                 "+ marks the image centre)" % (name, len(pts), W, H), fontsize=11,
+                 y=1.0 - 0.12 / fig_h, va="top")
     for ax, key, side, colour in ((axes[0], "uv_left", "left", LEFT_COLOUR),
                                   (axes[1], "uv_right", "right", RIGHT_COLOUR)):
         uv = grid[key]
@@ -471,13 +490,30 @@ def plot_projected_grid(rep, grid, out_dir, quiet):
         ax.set_ylabel("v, down (px)")
         ax.set_title("%s camera" % side, fontsize=10)
         ax.grid(True, alpha=0.3)
-    fig.tight_layout()
     save(fig, out_dir, "projected_grid.png", quiet)
 
 
 # --------------------------------------------------------------------------- #
 # Figure 4: reconstruction uncertainty (thesis Fig. 3.2c)
 # --------------------------------------------------------------------------- #
+def magnification(ellipses, spacing):
+    """Nice factor making the largest ellipse's full major axis ~ELLIPSE_TARGET * spacing."""
+    largest = max([e[0] for e in ellipses if math.isfinite(e[0])] or [0.0])
+    if largest <= 0:
+        return 1.0, 0.0
+    return nice_floor(ELLIPSE_TARGET * spacing / (2.0 * largest)), largest
+
+
+def draw_ellipses(ax, centres, params, values, factor, cmap, norm, alpha):
+    for c, (a, b, ang), s in zip(centres, params, values):
+        ax.add_patch(Ellipse((c[0], c[1]), 2 * factor * a, 2 * factor * b, angle=ang,
+                             fc=cmap(norm(s)) if math.isfinite(s) else "0.6",
+                             ec="k", lw=0.6, alpha=alpha))
+    if len(centres):
+        ax.scatter(centres[:, 0], centres[:, 1], c=values, cmap=cmap, norm=norm, s=9,
+                   ec="k", lw=0.4, zorder=5)
+
+
 def plot_reconstruction_uncertainty(rep, grid, out_dir, quiet):
     name = rep.text("name")
     Z = rep.number("stereo.working_distance_mm")
@@ -486,30 +522,49 @@ def plot_reconstruction_uncertainty(rep, grid, out_dir, quiet):
     pts, covs, sd = grid["point"], grid["cov"], grid["sigma_depth"]
     n = len(pts)
 
-    # Magnification: the largest ellipse (full major axis, either view) spans
-    # about ELLIPSE_TARGET of the grid spacing.
+    # Each view gets its own magnification: depth uncertainty is several times
+    # the lateral one, so a common factor would shrink the x-y ellipses to dots.
     xy = [ellipse_params(c[:2, :2]) for c in covs]
     xz = [ellipse_params(c[np.ix_([0, 2], [0, 2])]) for c in covs]
-    largest = max([e[0] for e in xy + xz if math.isfinite(e[0])] or [0.0])
     extent = overlap if len(overlap) else (pts[:, :2] if n else np.zeros((0, 2)))
     fallback = 0.1 * float(np.ptp(extent[:, 0])) if len(extent) else 10.0
     spacing = grid_spacing(pts[:, :2], fallback) if n else fallback
-    factor = nice_floor(ELLIPSE_TARGET * spacing / (2.0 * largest)) if largest > 0 else 1.0
+    f_xy, big_xy = magnification(xy, spacing)
+    f_xz, big_xz = magnification(xz, spacing)
 
-    fig = plt.figure(figsize=(11.5, 10.5))
-    gs = fig.add_gridspec(2, 2, height_ratios=[2.6, 1.0], width_ratios=[1.0, 0.035],
-                          hspace=0.28, wspace=0.05)
-    ax = fig.add_subplot(gs[0, 0])
-    ax_z = fig.add_subplot(gs[1, 0])
-    cax = fig.add_subplot(gs[:, 1])
-    fig.suptitle("%s\nReconstruction uncertainty: 1σ ellipses at %.3g px image noise, "
-                 "ellipses ×%g" % (name, sigma_px, factor), fontsize=11)
+    # Plot ranges (mm).
+    parts = [a for a in (overlap, pts[:, :2]) if len(a)]
+    src = np.vstack(parts) if parts else np.array([[-100.0, -100.0], [100.0, 100.0]])
+    reach = max(f_xy * big_xy, f_xz * big_xz)
+    pad = 0.04 * max(float(np.ptp(src[:, 0])), float(np.ptp(src[:, 1])), 1.0) + reach
+    x_lo, x_hi = src[:, 0].min() - pad, src[:, 0].max() + pad
+    y_lo, y_hi = src[:, 1].min() - pad, src[:, 1].max() + pad
+    if n:
+        z_mid = float(np.mean(pts[:, 2]))
+        z_half = max(float(np.ptp(pts[:, 2])) / 2.0 + 1.3 * f_xz * big_xz, 0.09 * (x_hi - x_lo))
+    else:
+        z_mid, z_half = Z, 0.09 * (x_hi - x_lo)
+
+    # Explicit layout (inches) so both equal-aspect panels fill their boxes.
+    ax_w = 8.0
+    mm_per_in = (x_hi - x_lo) / ax_w
+    h_top, h_bot = (y_hi - y_lo) / mm_per_in, 2.0 * z_half / mm_per_in
+    m_left, m_right, m_top, m_gap, m_bottom, cb_gap, cb_w = 1.0, 1.5, 1.05, 0.95, 0.6, 0.3, 0.25
+    fig_w, fig_h = m_left + ax_w + m_right, m_top + h_top + m_gap + h_bot + m_bottom
+    fig = plt.figure(figsize=(fig_w, fig_h))
+    ax = fig.add_axes([m_left / fig_w, (m_bottom + h_bot + m_gap) / fig_h, ax_w / fig_w, h_top / fig_h])
+    ax_z = fig.add_axes([m_left / fig_w, m_bottom / fig_h, ax_w / fig_w, h_bot / fig_h])
+    cax = fig.add_axes([(m_left + ax_w + cb_gap) / fig_w, m_bottom / fig_h, cb_w / fig_w,
+                        (h_top + m_gap + h_bot) / fig_h])
+    scale = ("ellipses ×%g (x–y), ×%g (x–z)" % (f_xy, f_xz)) if n else "no grid points"
+    fig.suptitle("%s\nReconstruction uncertainty: 1σ ellipses for %.3g px image noise, %s"
+                 % (name, sigma_px, scale), fontsize=11, y=1.0 - 0.12 / fig_h, va="top")
 
     finite_sd = sd[np.isfinite(sd)] if n else sd
     if finite_sd.size:
         lo, hi = float(finite_sd.min()), float(finite_sd.max())
-        if hi - lo < 1e-12 * max(abs(hi), 1.0):
-            lo, hi = lo * 0.99 - 1e-12, hi * 1.01 + 1e-12
+        if hi - lo < 1e-9 * max(abs(hi), 1.0):
+            lo, hi = lo - 0.01 * abs(lo) - 1e-12, hi + 0.01 * abs(hi) + 1e-12
         norm = colors.Normalize(lo, hi)
     else:
         norm = colors.Normalize(0.0, 1.0)
@@ -517,48 +572,34 @@ def plot_reconstruction_uncertainty(rep, grid, out_dir, quiet):
 
     # -- x-y view on the working plane
     add_polygon(ax, overlap, fc=OVERLAP_COLOUR, ec=OVERLAP_COLOUR, alpha=0.08, lw=1.0)
-    for p, (a, b, ang), s in zip(pts, xy, sd):
-        ax.add_patch(Ellipse((p[0], p[1]), 2 * factor * a, 2 * factor * b, angle=ang,
-                             fc=cmap(norm(s)), ec="k", lw=0.6, alpha=0.75))
     if n:
-        ax.scatter(pts[:, 0], pts[:, 1], c=sd, cmap=cmap, norm=norm, s=10, ec="k", lw=0.4, zorder=5)
+        draw_ellipses(ax, pts[:, :2], xy, sd, f_xy, cmap, norm, 0.8)
     else:
         no_data(ax, "no grid points")
-    src = np.vstack([a for a in (overlap, pts[:, :2] if n else None) if a is not None and len(a)]) \
-        if (len(overlap) or n) else np.array([[-1.0, -1.0], [1.0, 1.0]])
-    reach = factor * largest
-    x_lo, x_hi = src[:, 0].min() - reach, src[:, 0].max() + reach
-    y_lo, y_hi = src[:, 1].min() - reach, src[:, 1].max() + reach
-    pad = 0.04 * max(x_hi - x_lo, y_hi - y_lo, 1.0)
-    ax.set_xlim(x_lo - pad, x_hi + pad)
-    ax.set_ylim(y_hi + pad, y_lo - pad)  # y points down
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(y_hi, y_lo)  # y points down
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x, right (mm)")
     ax.set_ylabel("y, down (mm)")
-    ax.set_title("working plane z = %.4g mm, x–y (ellipses ×%g, overlap shaded)" % (Z, factor),
-                 fontsize=10)
+    ax.set_title("working plane z = %.4g mm, x–y view (%s; overlap shaded)"
+                 % (Z, "ellipses ×%g; largest 1σ semi-axis %.3g mm" % (f_xy, big_xy) if n
+                    else "no grid points"), fontsize=10)
     ax.grid(True, alpha=0.3)
 
-    # -- x-z view: depth uncertainty (rows of equal x overlay each other)
+    # -- x-z view: depth uncertainty (points of equal x overlay each other)
     ax_z.axhline(Z, color="0.5", lw=0.8)
-    for p, (a, b, ang), s in zip(pts, xz, sd):
-        ax_z.add_patch(Ellipse((p[0], p[2]), 2 * factor * a, 2 * factor * b, angle=ang,
-                               fc=cmap(norm(s)), ec="k", lw=0.6, alpha=0.45))
     if n:
-        ax_z.scatter(pts[:, 0], pts[:, 2], c=sd, cmap=cmap, norm=norm, s=10, ec="k", lw=0.4,
-                     zorder=5)
-        z_mid = float(np.mean(pts[:, 2]))
-        z_half = max(float(np.ptp(pts[:, 2])) / 2.0 + 1.15 * reach, 0.05 * (x_hi - x_lo))
+        draw_ellipses(ax_z, pts[:, [0, 2]], xz, sd, f_xz, cmap, norm, 0.45)
     else:
         no_data(ax_z, "no grid points")
-        z_mid, z_half = Z, 0.1 * (x_hi - x_lo)
-    ax_z.set_xlim(x_lo - pad, x_hi + pad)
+    ax_z.set_xlim(x_lo, x_hi)
     ax_z.set_ylim(z_mid - z_half, z_mid + z_half)
     ax_z.set_aspect("equal", adjustable="box")
     ax_z.set_xlabel("x, right (mm)")
-    ax_z.set_ylabel("z, forward (mm)")
-    ax_z.set_title("x–z view, depth uncertainty (ellipses ×%g; all rows of y overlaid)" % factor,
-                   fontsize=10)
+    ax_z.set_ylabel("z, fwd (mm)")
+    ax_z.set_title("x–z view, depth uncertainty (%s)"
+                   % ("ellipses ×%g; largest 1σ semi-axis %.3g mm; rows of equal x overlaid"
+                      % (f_xz, big_xz) if n else "no grid points"), fontsize=10)
     ax_z.grid(True, alpha=0.3)
 
     sm = cm.ScalarMappable(norm=norm, cmap=cmap)
@@ -567,7 +608,6 @@ def plot_reconstruction_uncertainty(rep, grid, out_dir, quiet):
     cb.set_label("depth 1σ (mm)")
     if not finite_sd.size:
         cax.set_visible(False)
-    fig.subplots_adjust(left=0.08, right=0.92, top=0.9, bottom=0.06)
     save(fig, out_dir, "reconstruction_uncertainty.png", quiet)
 
 

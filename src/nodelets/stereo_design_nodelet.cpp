@@ -137,8 +137,10 @@ class StereoDesignNodelet : public nodelet::Nodelet {
 
     auto fill = base("overlap", visualization_msgs::Marker::TRIANGLE_LIST);
     fill.color = color(0.2f, 0.9f, 0.3f, 0.5f);
+    // Fan triangulation of the convex overlap, both windings so that rviz shows it from either side.
     for (size_t i = 1; i + 1 < r.overlap.size(); ++i) {
-      for (size_t k : {size_t(0), i, i + 1}) fill.points.push_back(toPoint(Eigen::Vector3d(r.overlap[k].x(), r.overlap[k].y(), Z)));
+      for (size_t k : {size_t(0), i, i + 1, size_t(0), i + 1, i})
+        fill.points.push_back(toPoint(Eigen::Vector3d(r.overlap[k].x(), r.overlap[k].y(), Z)));
     }
     out.markers.push_back(fill);
 

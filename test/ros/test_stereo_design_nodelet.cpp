@@ -2,6 +2,7 @@
 // rostest: the stereo_design nodelet publishes the Part I rig (config/part1_rig_design.yaml:
 // b = 210 mm, 54.4 deg between the optical axes, working plane at 245 mm).
 #include <gtest/gtest.h>
+#include <nodelet/NodeletList.h>
 #include <ros/ros.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
@@ -9,6 +10,7 @@
 
 #include <cmath>
 #include <map>
+#include <set>
 
 namespace {
 visualization_msgs::MarkerArray::ConstPtr g_markers;
@@ -54,6 +56,13 @@ TEST(StereoDesignNodelet, PublishesFrustaOverlapEllipsoidsAndTf) {
       EXPECT_NEAR(m.points[0].x, -0.105, 1e-12);
     }
   }
+
+  // The nodelet with a bad ~config logged an error and stayed loaded; the manager is alive with both.
+  nodelet::NodeletList list;
+  ASSERT_TRUE(ros::service::call("manager/list", list)) << "nodelet manager is gone";
+  std::set<std::string> loaded(list.response.nodelets.begin(), list.response.nodelets.end());
+  EXPECT_TRUE(loaded.count("/stereo_design"));
+  EXPECT_TRUE(loaded.count("/stereo_design_bad"));
 
   geometry_msgs::TransformStamped l, r;
   ASSERT_NO_THROW(l = buffer.lookupTransform("stereo_rig", "stereo_left_optical_frame", ros::Time(0), ros::Duration(10.0)));

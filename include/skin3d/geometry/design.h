@@ -47,7 +47,9 @@ struct DesignConfig {
   int width_px = 0;
   int height_px = 0;
   double pixel_size_mm = 0.0;
-  double sensor_width_mm = std::numeric_limits<double>::quiet_NaN();   //!< optional; default width_px * pixel
+  /** Optional datasheet sensor size (the thesis rounds 4224 x 1.12 um to 4.8 mm). It feeds the thesis
+   *  formulas (angles and fields of view, eq. 2.26/2.27) only; the camera model uses width_px * pixel. */
+  double sensor_width_mm = std::numeric_limits<double>::quiet_NaN();
   double sensor_height_mm = std::numeric_limits<double>::quiet_NaN();  //!< optional
   // lens
   double focal_length_mm = 0.0;

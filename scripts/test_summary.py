@@ -1,0 +1,52 @@
+#!/usr/bin/python3
+"""Summarise the JUnit XML files that catkin's run_tests wrote.
+
+Usage: test_summary.py RESULTS_DIR
+Prints each failed or errored test case, then the closing line
+``N passed, N failed[, N skipped]``. Exit status 1 when anything failed or
+no test ran at all, else 0. A rostest launch contributes its wrapper case
+(the launch itself) besides the gtest cases of its test node.
+"""
+import glob
+import os
+import sys
+import xml.etree.ElementTree as ET
+
+
+def main():
+    if len(sys.argv) != 2:
+        print(__doc__, file=sys.stderr)
+        return 2
+    root = sys.argv[1]
+    files = sorted(glob.glob(os.path.join(root, "**", "*.xml"), recursive=True))
+    passed = failed = skipped = 0
+    for path in files:
+        try:
+            tree = ET.parse(path)
+        except ET.ParseError as e:
+            print(f"FAILED  {path}: unreadable result file ({e})")
+            failed += 1
+            continue
+        for case in tree.iter("testcase"):
+            name = f"{case.get('classname', '')}.{case.get('name', '')}"
+            problems = case.findall("failure") + case.findall("error")
+            if problems:
+                failed += 1
+                msg = (problems[0].get("message") or problems[0].text or "").strip().splitlines()
+                print(f"FAILED  {name} ({os.path.basename(path)}): {msg[0] if msg else ''}")
+            elif case.find("skipped") is not None or case.get("status") == "notrun":
+                skipped += 1
+            else:
+                passed += 1
+    if passed + failed == 0:
+        print(f"no test results found under {root}")
+        failed = 1
+    line = f"{passed} passed, {failed} failed"
+    if skipped:
+        line += f", {skipped} skipped"
+    print(line)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -192,6 +192,17 @@ TEST(StereoDesignTool, ExitCodesAndMessages) {
   EXPECT_NE(out.find("lens.focal_length_mm"), std::string::npos) << out;
   EXPECT_NE(out.find("-1"), std::string::npos) << out;
 
+  // With plots: the four PNGs of scripts/plot_design.py (thesis Fig. 3.1, 3.2) are written and not empty.
+  const std::string pdir = dir + "/plots";
+  out = run(bin + " --config " SKIN3D_SOURCE_DIR "/config/slam_rig_design.yaml --quiet --out " + pdir, &status);
+  EXPECT_EQ(status, 0) << out;
+  for (const char* png : {"depth_resolution.png", "fields_of_view.png", "projected_grid.png",
+                          "reconstruction_uncertainty.png"}) {
+    std::ifstream f(pdir + "/" + png, std::ios::binary | std::ios::ate);
+    EXPECT_TRUE(f.good()) << png;
+    EXPECT_GT(static_cast<long>(f.tellg()), 20000L) << png;
+  }
+
   out = run(bin + " --config /nonexistent.yaml", &status);
   EXPECT_EQ(status, 1) << out;
   EXPECT_NE(out.find("cannot read"), std::string::npos) << out;

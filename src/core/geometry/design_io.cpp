@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "../common/yaml_section.h"
 #include "skin3d/geometry/design.h"
 #include "skin3d/geometry/quaternion.h"
 
@@ -19,93 +20,7 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
-[[noreturn]] void fail(const std::string& field, const std::string& why) {
-  throw DesignConfigError(field, "field '" + field + "': " + why);
-}
-
-/** Walks one YAML mapping, remembers which keys were read, complains about the others. */
-class Section {
- public:
-  /** @param known every key this section may hold; others are reported before anything else is read. */
-  Section(const YAML::Node& node, std::string path, std::set<std::string> known)
-      : node_(node), path_(std::move(path)), known_(std::move(known)) {
-    if (present() && !node_.IsMap()) fail(path_.empty() ? "(top level)" : path_, "must be a mapping (key: value lines)");
-    if (!present()) return;
-    for (const auto& kv : node_) {
-      const std::string k = kv.first.as<std::string>();
-      if (!known_.count(k)) {
-        std::string list;
-        for (const auto& n : known_) list += (list.empty() ? "" : ", ") + n;
-        fail(field(k), "unknown field (misspelt?); known here: " + list);
-      }
-    }
-  }
-  bool present() const { return node_.IsDefined() && !node_.IsNull(); }
-  bool has(const std::string& key) const { return present() && get(key).IsDefined() && !get(key).IsNull(); }
-  YAML::Node get(const std::string& key) const { return node_[key]; }  // const: never inserts
-  std::string field(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
-
-  double number(const std::string& key, bool required, double fallback = std::nan("")) {
-    if (!has(key)) {
-      if (required) fail(field(key), "missing (required)");
-      return fallback;
-    }
-    const YAML::Node v = get(key);
-    if (!v.IsScalar()) fail(field(key), "must be a number");
-    double d;
-    try {
-      d = v.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(field(key), "'" + v.Scalar() + "' is not a number");
-    }
-    if (!std::isfinite(d)) fail(field(key), "'" + v.Scalar() + "' must be a finite number");
-    return d;
-  }
-
-  int integer(const std::string& key, bool required, int fallback = 0) {
-    const double d = number(key, required, fallback);
-    if (std::floor(d) != d || std::abs(d) > 1e9) fail(field(key), std::to_string(d) + " must be a whole number");
-    return static_cast<int>(d);
-  }
-
-  std::vector<double> list(const std::string& key, size_t n, bool required) {
-    if (!has(key)) {
-      if (required) fail(field(key), "missing (required)");
-      return {};
-    }
-    const YAML::Node v = get(key);
-    if (!v.IsSequence() || v.size() != n)
-      fail(field(key), "must be a list of " + std::to_string(n) + " numbers, e.g. [" + (n == 3 ? "105, 0, 15" : "7, 5") + "]");
-    std::vector<double> out;
-    for (size_t i = 0; i < n; ++i) {
-      double d;
-      try {
-        d = v[i].as<double>();
-      } catch (const YAML::Exception&) {
-        fail(field(key), "element " + std::to_string(i) + " '" + v[i].Scalar() + "' is not a number");
-      }
-      if (!std::isfinite(d)) fail(field(key), "element " + std::to_string(i) + " must be a finite number");
-      out.push_back(d);
-    }
-    return out;
-  }
-
-  std::string text(const std::string& key, const std::string& fallback) {
-    if (!has(key)) return fallback;
-    if (!get(key).IsScalar()) fail(field(key), "must be text");
-    return get(key).Scalar();
-  }
-
-  Section sub(const std::string& key, bool required, std::set<std::string> known) {
-    if (!has(key) && required) fail(field(key), "missing section (required)");
-    return Section(has(key) ? get(key) : YAML::Node(), field(key), std::move(known));
-  }
-
- private:
-  YAML::Node node_;
-  std::string path_;
-  std::set<std::string> known_;
-};
+using Section = common::YamlSection<DesignConfigError>;
 
 std::string fmt(double v, int prec = 3) {
   if (std::isinf(v)) return "inf";
@@ -172,10 +87,10 @@ DesignConfig parseDesignConfig(const std::string& yaml_text, const std::string& 
   const auto rl = geo.list("left_rotation_deg", 3, false);
   const auto rr = geo.list("right_rotation_deg", 3, false);
   if (rl.empty() != rr.empty())
-    fail(geo.field(rl.empty() ? "left_rotation_deg" : "right_rotation_deg"),
+    Section::fail(geo.field(rl.empty() ? "left_rotation_deg" : "right_rotation_deg"),
          "missing: give both per-camera rotations, or neither");
   if (!rl.empty()) {
-    if (has_conv) fail(geo.field("convergence_deg"), "give either convergence_deg or the two per-camera rotations, not both");
+    if (has_conv) Section::fail(geo.field("convergence_deg"), "give either convergence_deg or the two per-camera rotations, not both");
     c.per_camera_rotation = true;
     c.left_rotation_deg = Eigen::Vector3d(rl[0], rl[1], rl[2]);
     c.right_rotation_deg = Eigen::Vector3d(rr[0], rr[1], rr[2]);
@@ -190,7 +105,7 @@ DesignConfig parseDesignConfig(const std::string& yaml_text, const std::string& 
   const auto grid = an.list("grid", 2, false);
   if (!grid.empty()) {
     for (double g : grid)
-      if (std::floor(g) != g) fail(an.field("grid"), "must be two whole numbers [nx, ny]");
+      if (std::floor(g) != g) Section::fail(an.field("grid"), "must be two whole numbers [nx, ny]");
     c.grid_nx = static_cast<int>(grid[0]);
     c.grid_ny = static_cast<int>(grid[1]);
   }

@@ -1,0 +1,45 @@
+/**
+ * @file rectification.h
+ * @brief Stereo rectification of a calibrated rig into ROS CameraInfo (K, D, R, P), including strongly
+ * converged rigs (the thesis' Part I rig has 54.4 deg between the optical axes).
+ *
+ * With OpenCV's default CALIB_ZERO_DISPARITY (what ROS camera_calibration uses), a strongly converged
+ * rig's scene leaves both rectified images. With points of interest given, rectification uses flags 0
+ * (each camera keeps its own principal point; the right P then has a different cx, which
+ * image_geometry's StereoCameraModel handles through the disparity offset) and the smallest alpha in
+ * {0, 0.25, 0.5, 0.75, 1} for which every point of interest lies inside both rectified images.
+ *
+ * SPDX-License-Identifier: BSD-3-Clause
+ */
+#pragma once
+
+#include <Eigen/Core>
+#include <stdexcept>
+#include <vector>
+
+#include "skin3d/geometry/camera.h"
+#include "skin3d/geometry/stereo_rig.h"
+
+namespace skin3d {
+namespace stereo {
+
+struct RectifiedPair {
+  geometry::CameraInfo left, right;
+  double alpha = 0.0;       //!< the free-scaling parameter used
+  bool zero_disparity = true;  //!< CALIB_ZERO_DISPARITY used (equal cx in both P)
+};
+
+/**
+ * @brief Rectifies `rig` (raw cameras with their distortion) for images of the rig's size.
+ * @param points_of_interest left-frame points that must stay inside both rectified images (may be empty).
+ * @param margin_px distance those points must keep from the image border.
+ * @throws std::runtime_error naming the problem if no alpha keeps the points inside.
+ */
+RectifiedPair rectifyStereo(const geometry::StereoRig& rig, const std::vector<Eigen::Vector3d>& points_of_interest = {},
+                            double margin_px = 2.0);
+
+/** @brief Rectified pixel of a left-frame point in the left (right = false) or right rectified image. */
+Eigen::Vector2d projectRectified(const RectifiedPair& pair, const Eigen::Vector3d& X_left, bool right);
+
+}  // namespace stereo
+}  // namespace skin3d

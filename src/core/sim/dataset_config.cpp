@@ -1,0 +1,311 @@
+// SPDX-License-Identifier: BSD-3-Clause
+#include <Eigen/LU>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include "../common/yaml_section.h"
+#include "skin3d/geometry/quaternion.h"
+#include "skin3d/sim/dataset.h"
+
+namespace skin3d {
+namespace sim {
+
+namespace {
+
+using Section = common::YamlSection<SimConfigError>;
+constexpr double kDeg = M_PI / 180.0;
+
+std::string num(double v) {
+  std::ostringstream os;
+  os.precision(10);
+  os << v;
+  return os.str();
+}
+
+[[noreturn]] void bad(const std::string& field, double value, const std::string& why) {
+  throw SimConfigError(field, "field '" + field + "' = " + num(value) + ": " + why);
+}
+
+std::vector<Plateau> defaultPlateaus() {
+  std::vector<Plateau> out;
+  const double xs1[4] = {-0.0375, -0.0125, 0.0125, 0.0375}, xs2[3] = {-0.025, 0.0, 0.025};
+  for (int i = 0; i < 7; ++i) {
+    Plateau p;
+    p.centre = i < 4 ? Eigen::Vector2d(xs1[i], -0.02) : Eigen::Vector2d(xs2[i - 4], 0.02);
+    p.size = Eigen::Vector2d(0.015, 0.015);
+    p.height = 0.0001 * (i + 1);
+    out.push_back(p);
+  }
+  return out;
+}
+
+RigConfig partOneRig() {
+  RigConfig r;
+  r.focal_length = 2.94e-3;
+  r.pixel_size = 1.12e-6;
+  r.width = 4224;
+  r.height = 3136;
+  r.baseline = Eigen::Vector3d(0.210, 0.0, 0.0);
+  r.convergence = 54.4 * kDeg;
+  return r;
+}
+
+void readRig(const Section& s, RigConfig* r) {
+  r->focal_length = s.number("focal_length_mm", false, r->focal_length * 1e3) * 1e-3;
+  r->pixel_size = s.number("pixel_size_um", false, r->pixel_size * 1e6) * 1e-6;
+  r->width = s.integer("width_px", false, r->width);
+  r->height = s.integer("height_px", false, r->height);
+  const auto b = s.list("baseline_mm", 3, false);
+  if (!b.empty()) r->baseline = Eigen::Vector3d(b[0], b[1], b[2]) * 1e-3;
+  r->convergence = s.number("convergence_deg", false, r->convergence / kDeg) * kDeg;
+  if (s.has("distortion")) {
+    r->distortion = s.list("distortion", 0, false);
+    if (!r->distortion.empty() && r->distortion.size() != 5 && r->distortion.size() != 4)
+      bad(s.field("distortion"), r->distortion.size(), "plumb_bob takes 4 or 5 coefficients (k1 k2 p1 p2 [k3])");
+  }
+}
+
+void readPhotometry(const Section& s, RealismOptions* r) {
+  r->gain = s.number("gain", false, r->gain);
+  r->offset = s.number("offset", false, r->offset);
+  r->gamma = s.number("gamma", false, r->gamma);
+}
+
+}  // namespace
+
+DatasetKind parseDatasetKind(const std::string& name) {
+  if (name == "globe-landmarks") return DatasetKind::GlobeLandmarks;
+  if (name == "globe-images") return DatasetKind::GlobeImages;
+  if (name == "workpiece") return DatasetKind::Workpiece;
+  throw SimConfigError("kind", "unknown dataset kind '" + name + "'; known: globe-landmarks, globe-images, workpiece");
+}
+
+std::string datasetKindName(DatasetKind kind) {
+  switch (kind) {
+    case DatasetKind::GlobeLandmarks:
+      return "globe-landmarks";
+    case DatasetKind::GlobeImages:
+      return "globe-images";
+    case DatasetKind::Workpiece:
+      return "workpiece";
+  }
+  return "?";
+}
+
+RigConfig WorkpieceConfig::scaledRig() const {
+  RigConfig r = rig;
+  r.width = std::max(1, static_cast<int>(std::lround(rig.width * resolution_scale)));
+  r.height = std::max(1, static_cast<int>(std::lround(rig.height * resolution_scale)));
+  r.pixel_size = rig.pixel_size * rig.width / r.width;
+  return r;
+}
+
+void WorkpieceConfig::validate() const {
+  if (!(plate_size.x() > 0) || !(plate_size.y() > 0) || !plate_size.allFinite())
+    bad("workpiece.plate_size_mm", plate_size.minCoeff() * 1e3, "both sides must be > 0");
+  if (plateaus.empty()) throw SimConfigError("workpiece.plateaus", "field 'workpiece.plateaus': at least one plateau");
+  for (size_t i = 0; i < plateaus.size(); ++i) {
+    const auto& p = plateaus[i];
+    const std::string f = "workpiece.plateaus[" + std::to_string(i) + "]";
+    if (!(p.height > 0) || !std::isfinite(p.height) || p.height > 0.01)
+      bad(f + ".height_mm", p.height * 1e3, "must be in (0, 10] mm");
+    if (!(p.size.minCoeff() > 0) || !p.size.allFinite()) bad(f + ".size_mm", p.size.minCoeff() * 1e3, "must be > 0");
+    const Eigen::Vector2d lo = p.centre - 0.5 * p.size, hi = p.centre + 0.5 * p.size;
+    if ((lo.array() < -0.5 * plate_size.array()).any() || (hi.array() > 0.5 * plate_size.array()).any())
+      bad(f + ".centre_mm", p.centre.x() * 1e3, "the plateau must lie on the plate");
+  }
+  if (!(working_distance > 0) || !std::isfinite(working_distance))
+    bad("workpiece.working_distance_mm", working_distance * 1e3, "must be > 0");
+  if (!std::isfinite(tilt) || std::abs(tilt) >= 60 * kDeg)
+    bad("workpiece.tilt_deg", tilt / kDeg, "must be in (-60, 60)");
+  if (!(resolution_scale > 0) || resolution_scale > 1)
+    bad("workpiece.resolution_scale", resolution_scale, "must be in (0, 1]");
+  if (frames < 1) bad("workpiece.frames", frames, "must be >= 1");
+  if (!(fps > 0) || !std::isfinite(fps)) bad("workpiece.fps", fps, "must be > 0");
+  if (!(texel > 0) || texel > 1e-3) bad("workpiece.texel_um", texel * 1e6, "must be in (0, 1000]");
+  scaledRig().makeRig();
+}
+
+DatasetConfig defaultDatasetConfig(DatasetKind kind) {
+  DatasetConfig c;
+  c.kind = kind;
+  c.workpiece.rig = partOneRig();
+  c.workpiece.plateaus = defaultPlateaus();
+  // The right camera's photometry differs from the left's, as two real modules do.
+  c.images.right.gain = 0.93;
+  c.images.right.offset = 0.015;
+  c.images.right.gamma = 1.05;
+  if (kind == DatasetKind::Workpiece) {
+    // The Part I lenses are focused at the working distance; a little more blur than the binned SLAM rig.
+    c.images.left.blur_sigma = c.images.right.blur_sigma = 0.8;
+  }
+  return c;
+}
+
+void makeIdeal(DatasetConfig* c) {
+  c->images.ideal = true;
+  c->images.left = RealismOptions::ideal();
+  c->images.right = RealismOptions::ideal();
+  c->images.perturbation.enabled = false;
+}
+
+void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std::string& source) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    throw SimConfigError("(file)", "cannot parse " + source + " as YAML: line " + std::to_string(e.mark.line + 1) +
+                                       ", column " + std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  c->source = source;
+  if (!root || root.IsNull()) return;  // an empty file changes nothing
+  const Section top(root, "", {"seed", "globe", "gyro", "rig", "workpiece", "images"});
+  if (top.has("seed")) {
+    const double s = top.number("seed", false);
+    if (s < 0 || std::floor(s) != s) bad("seed", s, "must be a whole number >= 0");
+    c->seed = static_cast<std::uint64_t>(s);
+  }
+  GlobeConfig& g = c->globe;
+  const Section gs = top.sub("globe", false,
+                             {"radius_mm", "distance_mm", "latitude_deg", "tilt_deg", "rate_rad_s", "frames", "fps",
+                              "landmarks", "descriptor_size", "descriptor_noise", "lookalike_fraction",
+                              "lookalike_distance", "pixel_sigma_px", "max_incidence_deg"});
+  g.radius = gs.number("radius_mm", false, g.radius * 1e3) * 1e-3;
+  g.distance = gs.number("distance_mm", false, g.distance * 1e3) * 1e-3;
+  g.latitude = gs.number("latitude_deg", false, g.latitude / kDeg) * kDeg;
+  g.tilt = gs.number("tilt_deg", false, g.tilt / kDeg) * kDeg;
+  g.rate = gs.number("rate_rad_s", false, g.rate);
+  g.frames = gs.integer("frames", false, g.frames);
+  g.fps = gs.number("fps", false, g.fps);
+  g.landmarks = gs.integer("landmarks", false, g.landmarks);
+  g.descriptor_size = gs.integer("descriptor_size", false, g.descriptor_size);
+  g.descriptor_noise = gs.number("descriptor_noise", false, g.descriptor_noise);
+  g.lookalike_fraction = gs.number("lookalike_fraction", false, g.lookalike_fraction);
+  g.lookalike_distance = gs.number("lookalike_distance", false, g.lookalike_distance);
+  g.pixel_sigma = gs.number("pixel_sigma_px", false, g.pixel_sigma);
+  g.max_incidence = gs.number("max_incidence_deg", false, g.max_incidence / kDeg) * kDeg;
+
+  const Section gy = top.sub("gyro", false, {"rate_hz", "noise_rad_s", "bias_rad_s", "bias_walk"});
+  g.gyro_rate = gy.number("rate_hz", false, g.gyro_rate);
+  g.gyro_noise = gy.number("noise_rad_s", false, g.gyro_noise);
+  const auto bias = gy.list("bias_rad_s", 3, false);
+  if (!bias.empty()) g.gyro_bias = Eigen::Vector3d(bias[0], bias[1], bias[2]);
+  g.gyro_bias_walk = gy.number("bias_walk", false, g.gyro_bias_walk);
+
+  const std::set<std::string> rig_keys = {"focal_length_mm", "pixel_size_um",   "width_px",  "height_px",
+                                          "baseline_mm",     "convergence_deg", "distortion"};
+  // `rig` applies to the kind's own rig: the SLAM rig for the globe, the Part I rig for the workpiece.
+  const Section rs = top.sub("rig", false, rig_keys);
+  readRig(rs, c->kind == DatasetKind::Workpiece ? &c->workpiece.rig : &g.rig);
+
+  WorkpieceConfig& w = c->workpiece;
+  const Section ws = top.sub("workpiece", false,
+                             {"plate_size_mm", "plateaus", "working_distance_mm", "tilt_deg", "resolution_scale",
+                              "frames", "fps", "texel_um"});
+  const auto ps = ws.list("plate_size_mm", 2, false);
+  if (!ps.empty()) w.plate_size = Eigen::Vector2d(ps[0], ps[1]) * 1e-3;
+  if (ws.has("plateaus")) {
+    w.plateaus.clear();
+    for (const auto& p : ws.sequence("plateaus", {"centre_mm", "size_mm", "height_mm"})) {
+      Plateau q;
+      const auto cc = p.list("centre_mm", 2, true), sz = p.list("size_mm", 2, true);
+      q.centre = Eigen::Vector2d(cc[0], cc[1]) * 1e-3;
+      q.size = Eigen::Vector2d(sz[0], sz[1]) * 1e-3;
+      q.height = p.number("height_mm", true) * 1e-3;
+      w.plateaus.push_back(q);
+    }
+  }
+  w.working_distance = ws.number("working_distance_mm", false, w.working_distance * 1e3) * 1e-3;
+  w.tilt = ws.number("tilt_deg", false, w.tilt / kDeg) * kDeg;
+  w.resolution_scale = ws.number("resolution_scale", false, w.resolution_scale);
+  w.frames = ws.integer("frames", false, w.frames);
+  w.fps = ws.number("fps", false, w.fps);
+  w.texel = ws.number("texel_um", false, w.texel * 1e6) * 1e-6;
+
+  ImageConfig& im = c->images;
+  const Section is =
+      top.sub("images", false,
+              {"ideal", "supersample", "realism", "left", "right", "calibration_error", "light_elevation_deg"});
+  im.supersample = is.integer("supersample", false, im.supersample);
+  im.light_elevation = is.number("light_elevation_deg", false, im.light_elevation / kDeg) * kDeg;
+  const Section re = is.sub("realism", false, {"blur_sigma_px", "vignetting", "full_well", "read_noise_dn"});
+  for (RealismOptions* r : {&im.left, &im.right}) {
+    r->blur_sigma = re.number("blur_sigma_px", false, r->blur_sigma);
+    r->vignetting = re.number("vignetting", false, r->vignetting);
+    r->full_well = re.number("full_well", false, r->full_well);
+    r->read_noise = re.number("read_noise_dn", false, r->read_noise);
+  }
+  readPhotometry(is.sub("left", false, {"gain", "offset", "gamma"}), &im.left);
+  readPhotometry(is.sub("right", false, {"gain", "offset", "gamma"}), &im.right);
+  const Section ce = is.sub("calibration_error", false,
+                            {"enabled", "baseline_rel", "rotation_deg", "principal_point_px", "focal_rel"});
+  im.perturbation.enabled = ce.boolean("enabled", im.perturbation.enabled);
+  im.perturbation.baseline_rel = ce.number("baseline_rel", false, im.perturbation.baseline_rel);
+  im.perturbation.rotation = ce.number("rotation_deg", false, im.perturbation.rotation / kDeg) * kDeg;
+  im.perturbation.principal_point = ce.number("principal_point_px", false, im.perturbation.principal_point);
+  im.perturbation.focal_rel = ce.number("focal_rel", false, im.perturbation.focal_rel);
+  if (is.boolean("ideal", false)) makeIdeal(c);
+  validateDatasetConfig(*c);
+}
+
+void validateDatasetConfig(const DatasetConfig& c) {
+  if (c.kind == DatasetKind::Workpiece) {
+    c.workpiece.validate();
+  } else {
+    c.globe.validate();
+  }
+  if (c.kind != DatasetKind::GlobeLandmarks) {
+    const ImageConfig& im = c.images;
+    if (im.supersample < 1 || im.supersample > 8) bad("images.supersample", im.supersample, "must be in 1..8");
+    for (const auto* r : {&im.left, &im.right}) {
+      const std::string side = r == &im.left ? "left" : "right";
+      if (!(r->gain > 0) || !std::isfinite(r->gain)) bad("images." + side + ".gain", r->gain, "must be > 0");
+      if (!(r->gamma > 0) || !std::isfinite(r->gamma)) bad("images." + side + ".gamma", r->gamma, "must be > 0");
+      if (!std::isfinite(r->offset) || std::abs(r->offset) > 0.5)
+        bad("images." + side + ".offset", r->offset, "must be in [-0.5, 0.5]");
+      if (!(r->blur_sigma >= 0)) bad("images.realism.blur_sigma_px", r->blur_sigma, "must be >= 0");
+      if (!(r->vignetting >= 0) || r->vignetting >= 1)
+        bad("images.realism.vignetting", r->vignetting, "must be in [0, 1)");
+      if (!(r->full_well >= 0)) bad("images.realism.full_well", r->full_well, "must be >= 0 (0: no shot noise)");
+      if (!(r->read_noise >= 0)) bad("images.realism.read_noise_dn", r->read_noise, "must be >= 0");
+    }
+    const auto& p = im.perturbation;
+    for (const auto& [name, v] : {std::pair<const char*, double>{"baseline_rel", p.baseline_rel},
+                                  {"rotation_deg", p.rotation / kDeg},
+                                  {"principal_point_px", p.principal_point},
+                                  {"focal_rel", p.focal_rel}})
+      if (!(v >= 0) || !std::isfinite(v)) bad(std::string("images.calibration_error.") + name, v, "must be >= 0");
+  }
+}
+
+PerturbedCalibration perturbCalibration(const geometry::StereoRig& truth, const CalibrationPerturbation& p,
+                                        std::uint64_t seed) {
+  PerturbedCalibration out;
+  out.rig = truth;
+  if (!p.enabled) return out;
+  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 0xCA11B);
+  std::normal_distribution<double> n(0.0, 1.0);
+  out.baseline_scale = 1.0 + p.baseline_rel * n(rng);
+  // rotation: RMS magnitude of the 3-axis error vector (per axis rotation / sqrt(3)).
+  out.rotation_error = p.rotation / std::sqrt(3.0) * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  out.principal_left = p.principal_point * Eigen::Vector2d(n(rng), n(rng));
+  out.principal_right = p.principal_point * Eigen::Vector2d(n(rng), n(rng));
+  out.focal_scale_left = 1.0 + p.focal_rel * n(rng);
+  out.focal_scale_right = 1.0 + p.focal_rel * n(rng);
+  const auto perturbK = [](const geometry::PinholeCamera& cam, double fs, const Eigen::Vector2d& dpp) {
+    Eigen::Matrix3d K = cam.K();
+    K(0, 0) *= fs;
+    K(1, 1) *= fs;
+    K(0, 2) += dpp.x();
+    K(1, 2) += dpp.y();
+    return geometry::PinholeCamera(K, cam.width(), cam.height(), cam.D());
+  };
+  out.rig = geometry::StereoRig(perturbK(truth.left(), out.focal_scale_left, out.principal_left),
+                                perturbK(truth.right(), out.focal_scale_right, out.principal_right),
+                                geometry::so3Exp(out.rotation_error) * truth.R_rl(), truth.t_rl() * out.baseline_scale);
+  return out;
+}
+
+}  // namespace sim
+}  // namespace skin3d

@@ -1,0 +1,540 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--quiet]
+ *
+ * Generates a simulated dataset (DESIGN.md "Datasets") as a rosbag, deterministically from the seed,
+ * without a ROS master, plus FILE.truth.yaml beside it. KIND: globe-landmarks, globe-images, workpiece.
+ * Topics: stereo/{left,right}/camera_info, stereo/{left,right}/image_raw (image kinds),
+ * stereo/landmarks (landmark kind), imu/data (globe kinds), ground_truth/pose.
+ * Exit codes: 0 ok, 1 bad configuration, 2 bad command line, 3 cannot write the output.
+ */
+#include <geometry_msgs/PoseStamped.h>
+#include <rosbag/bag.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/Imu.h>
+#include <skin3d/LandmarkArray.h>
+#include <sys/stat.h>
+#include <yaml-cpp/yaml.h>
+
+#include <chrono>
+#include <cstring>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <opencv2/core.hpp>
+#include <sstream>
+#include <string>
+
+#include "skin3d/geometry/quaternion.h"
+#include "skin3d/sim/dataset.h"
+#include "skin3d/sim/globe.h"
+#include "skin3d/sim/render.h"
+#include "skin3d/stereo/rectification.h"
+
+namespace {
+
+using namespace skin3d;
+
+const char* kUsage =
+    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--quiet]\n"
+    "  KIND            globe-landmarks | globe-images | workpiece\n"
+    "  --out FILE.bag  the bag to write; the ground truth goes to FILE.truth.yaml beside it\n"
+    "  --seed N        random seed (default 1, or the config's seed); same seed + config = same data\n"
+    "  --config FILE   YAML overrides of the defaults (config/datasets/globe.yaml, workpiece.yaml)\n"
+    "  --ideal         no realism (blur, vignetting, photometry, noise) and an exact calibration\n"
+    "  --frames N      only the first N frames (quick tests)\n"
+    "  --quiet         no progress output\n";
+
+const std::string kLeftFrame = "stereo_left_optical_frame";
+const std::string kRightFrame = "stereo_right_optical_frame";
+const std::string kWorldFrame = "world";
+const ros::Time kStart(1000.0);  // a fixed, valid ROS time: bags are deterministic
+
+struct Options {
+  std::string kind, out, config;
+  long long seed = -1;
+  bool ideal = false, quiet = false;
+  int frames = -1;
+};
+
+class Progress {
+ public:
+  Progress(const std::string& what, int total, bool quiet) : what_(what), total_(total), quiet_(quiet) {}
+  void tick(int done) {
+    if (quiet_ || total_ <= 0) return;
+    const int pct = 100 * done / total_;
+    if (pct / 10 != last_ / 10 || done == total_) {
+      std::cout << "  " << what_ << ": " << done << "/" << total_ << " (" << pct << " %)" << std::endl;
+      last_ = pct;
+    }
+  }
+
+ private:
+  std::string what_;
+  int total_;
+  bool quiet_;
+  int last_ = -10;
+};
+
+sensor_msgs::CameraInfo toMsg(const geometry::CameraInfo& c, const std::string& frame, const ros::Time& t) {
+  sensor_msgs::CameraInfo m;
+  m.header.frame_id = frame;
+  m.header.stamp = t;
+  m.width = c.width;
+  m.height = c.height;
+  m.distortion_model = "plumb_bob";
+  m.D = c.D;
+  m.D.resize(5, 0.0);
+  for (int i = 0; i < 9; ++i) m.K[i] = c.K(i / 3, i % 3);
+  for (int i = 0; i < 9; ++i) m.R[i] = c.R(i / 3, i % 3);
+  for (int i = 0; i < 12; ++i) m.P[i] = c.P(i / 4, i % 4);
+  return m;
+}
+
+sensor_msgs::Image toMsg(const cv::Mat& img, const std::string& frame, const ros::Time& t) {
+  sensor_msgs::Image m;
+  m.header.frame_id = frame;
+  m.header.stamp = t;
+  m.height = img.rows;
+  m.width = img.cols;
+  m.encoding = "mono8";
+  m.is_bigendian = 0;
+  m.step = img.cols;
+  m.data.resize(static_cast<size_t>(img.rows) * img.cols);
+  for (int r = 0; r < img.rows; ++r) std::memcpy(&m.data[static_cast<size_t>(r) * img.cols], img.ptr(r), img.cols);
+  return m;
+}
+
+geometry_msgs::PoseStamped poseMsg(const Eigen::Isometry3d& T, const ros::Time& t) {
+  geometry_msgs::PoseStamped m;
+  m.header.frame_id = kWorldFrame;
+  m.header.stamp = t;
+  m.pose.position.x = T.translation().x();
+  m.pose.position.y = T.translation().y();
+  m.pose.position.z = T.translation().z();
+  const Eigen::Quaterniond q(T.linear());
+  m.pose.orientation.w = q.w();
+  m.pose.orientation.x = q.x();
+  m.pose.orientation.y = q.y();
+  m.pose.orientation.z = q.z();
+  return m;
+}
+
+void emitVec(YAML::Emitter& e, const Eigen::VectorXd& v) {
+  e << YAML::Flow << YAML::BeginSeq;
+  for (int i = 0; i < v.size(); ++i) e << v[i];
+  e << YAML::EndSeq;
+}
+
+void emitRig(YAML::Emitter& e, const char* name, const geometry::StereoRig& rig) {
+  e << YAML::Key << name << YAML::Value << YAML::BeginMap;
+  e << YAML::Key << "K_left" << YAML::Value;
+  emitVec(e, Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(rig.left().K().transpose()).data()));
+  e << YAML::Key << "K_right" << YAML::Value;
+  emitVec(e, Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(rig.right().K().transpose()).data()));
+  e << YAML::Key << "D" << YAML::Value;
+  emitVec(e, Eigen::Map<const Eigen::VectorXd>(rig.left().D().data(), rig.left().D().size()));
+  e << YAML::Key << "size" << YAML::Value << YAML::Flow << YAML::BeginSeq << rig.left().width() << rig.left().height()
+    << YAML::EndSeq;
+  e << YAML::Key << "right_centre_in_left_m" << YAML::Value;
+  emitVec(e, rig.rightCentre());
+  e << YAML::Key << "R_right_left" << YAML::Value;
+  emitVec(e, Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix3d(rig.R_rl().transpose()).data()));
+  e << YAML::Key << "baseline_mm" << YAML::Value << rig.baseline() * 1e3;
+  e << YAML::Key << "optical_axes_angle_deg" << YAML::Value << rig.opticalAxesAngle() * 180.0 / M_PI;
+  e << YAML::EndMap;
+}
+
+void emitRealism(YAML::Emitter& e, const sim::DatasetConfig& c, const sim::PerturbedCalibration& p) {
+  const auto& im = c.images;
+  e << YAML::Key << "realism" << YAML::Value << YAML::BeginMap;
+  e << YAML::Key << "ideal" << YAML::Value << im.ideal;
+  e << YAML::Key << "supersample" << YAML::Value << im.supersample;
+  for (const auto* r : {&im.left, &im.right}) {
+    e << YAML::Key << (r == &im.left ? "left" : "right") << YAML::Value << YAML::BeginMap;
+    e << YAML::Key << "blur_sigma_px" << YAML::Value << r->blur_sigma << YAML::Key << "vignetting" << YAML::Value
+      << r->vignetting << YAML::Key << "gain" << YAML::Value << r->gain << YAML::Key << "offset" << YAML::Value
+      << r->offset << YAML::Key << "gamma" << YAML::Value << r->gamma << YAML::Key << "full_well" << YAML::Value
+      << r->full_well << YAML::Key << "read_noise_dn" << YAML::Value << r->read_noise << YAML::EndMap;
+  }
+  e << YAML::Key << "calibration_error" << YAML::Value << YAML::BeginMap;
+  e << YAML::Key << "enabled" << YAML::Value << im.perturbation.enabled;
+  e << YAML::Key << "baseline_scale" << YAML::Value << p.baseline_scale;
+  e << YAML::Key << "rotation_error_deg" << YAML::Value;
+  emitVec(e, p.rotation_error * 180.0 / M_PI);
+  e << YAML::Key << "principal_point_error_left_px" << YAML::Value;
+  emitVec(e, p.principal_left);
+  e << YAML::Key << "principal_point_error_right_px" << YAML::Value;
+  emitVec(e, p.principal_right);
+  e << YAML::Key << "focal_scale_left" << YAML::Value << p.focal_scale_left;
+  e << YAML::Key << "focal_scale_right" << YAML::Value << p.focal_scale_right;
+  e << YAML::EndMap << YAML::EndMap;
+}
+
+bool writeText(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+  return static_cast<bool>(out);
+}
+
+long long fileSize(const std::string& path) {
+  struct stat st;
+  return stat(path.c_str(), &st) == 0 ? static_cast<long long>(st.st_size) : -1;
+}
+
+std::string truthPath(const std::string& bag) {
+  const std::string stem = bag.size() > 4 && bag.substr(bag.size() - 4) == ".bag" ? bag.substr(0, bag.size() - 4) : bag;
+  return stem + ".truth.yaml";
+}
+
+void writeImu(rosbag::Bag& bag, const sim::GlobeSimulator& s, double t_end) {
+  const double var = s.config().gyro_noise * s.config().gyro_noise;
+  for (const auto& g : s.gyro()) {
+    if (g.t >= t_end) break;
+    sensor_msgs::Imu m;
+    m.header.frame_id = kLeftFrame;  // the rig frame is the left optical frame
+    m.header.stamp = kStart + ros::Duration(g.t);
+    m.orientation.w = 1.0;
+    m.orientation_covariance[0] = -1.0;  // no orientation
+    m.angular_velocity.x = g.omega.x();
+    m.angular_velocity.y = g.omega.y();
+    m.angular_velocity.z = g.omega.z();
+    m.angular_velocity_covariance[0] = m.angular_velocity_covariance[4] = m.angular_velocity_covariance[8] = var;
+    m.linear_acceleration_covariance[0] = -1.0;  // no accelerometer
+    bag.write("imu/data", m.header.stamp, m);
+  }
+}
+
+// ------------------------------------------------------------------ globe (landmarks and images)
+
+int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet) {
+  sim::GlobeConfig gc = c.globe;
+  gc.seed = c.seed;
+  const sim::GlobeSimulator s(gc);
+  const bool images = c.kind == sim::DatasetKind::GlobeImages;
+  const geometry::StereoRig true_rig = s.rig();
+  const sim::PerturbedCalibration calib =
+      images ? sim::perturbCalibration(true_rig, c.images.perturbation, c.seed) : sim::PerturbedCalibration{true_rig};
+  const stereo::RectifiedPair info = stereo::rectifyStereo(calib.rig);
+
+  std::unique_ptr<sim::SphereScene> scene;
+  if (images) {
+    const auto t0 = std::chrono::steady_clock::now();
+    scene = std::make_unique<sim::SphereScene>(s.sphereCentreWorld(), gc.radius, c.seed);
+    scene->setOrientation(s.poseWorldGlobe().linear());
+    if (!quiet)
+      std::cout << "  globe texture built in "
+                << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s" << std::endl;
+  }
+  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
+                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
+  Progress progress(images ? "rendering frames" : "measuring frames", frames, quiet);
+  size_t total_landmarks = 0;
+  int min_lm = 1 << 30, max_lm = 0;
+  for (int k = 0; k < frames; ++k) {
+    const double t = s.stamp(k);
+    const ros::Time stamp = kStart + ros::Duration(t);
+    const Eigen::Isometry3d T_W_L = s.poseWorldLeft(t);
+    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
+    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
+    if (images) {
+      sim::RenderOptions ro;
+      ro.supersample = c.images.supersample;
+      // The lamp is fixed to the rig (the thesis turned the globe in front of a fixed camera and lamp).
+      const double el = c.images.light_elevation;
+      ro.light_dir = T_W_L.linear() * Eigen::Vector3d(0.3, std::sin(el), std::cos(el)).normalized();
+      const cv::Mat left = sim::renderIrradiance(*scene, true_rig.left(), T_W_L, ro);
+      const cv::Mat right = sim::renderIrradiance(*scene, true_rig.right(), T_W_L * T_L_R, ro);
+      const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
+      bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+      bag.write("stereo/right/image_raw", stamp,
+                toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
+    } else {
+      skin3d::LandmarkArray msg;
+      msg.header.frame_id = kLeftFrame;
+      msg.header.stamp = stamp;
+      for (const auto& m : s.measure(k)) {
+        skin3d::Landmark l;
+        l.position.x = m.position.x();
+        l.position.y = m.position.y();
+        l.position.z = m.position.z();
+        for (int i = 0; i < 9; ++i) l.covariance[i] = m.covariance(i / 3, i % 3);
+        l.descriptor = m.descriptor;
+        l.strength = m.strength;
+        l.u_left = m.uv_left.x();
+        l.v_left = m.uv_left.y();
+        l.u_right = m.uv_right.x();
+        l.v_right = m.uv_right.y();
+        msg.landmarks.push_back(l);
+      }
+      total_landmarks += msg.landmarks.size();
+      min_lm = std::min<int>(min_lm, msg.landmarks.size());
+      max_lm = std::max<int>(max_lm, msg.landmarks.size());
+      bag.write("stereo/landmarks", stamp, msg);
+    }
+    bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
+    progress.tick(k + 1);
+  }
+  writeImu(bag, s, frames / gc.fps);
+  if (!images && !quiet)
+    std::cout << "  landmarks per frame: min " << min_lm << ", mean " << total_landmarks / std::max(1, frames)
+              << ", max " << max_lm << std::endl;
+
+  truth << YAML::Key << "sphere" << YAML::Value << YAML::BeginMap;
+  truth << YAML::Key << "centre_world_m" << YAML::Value;
+  emitVec(truth, s.sphereCentreWorld());
+  truth << YAML::Key << "radius_m" << YAML::Value << gc.radius;
+  truth << YAML::EndMap;
+  truth << YAML::Key << "orbit" << YAML::Value << YAML::BeginMap;
+  truth << YAML::Key << "distance_m" << YAML::Value << gc.distance << YAML::Key << "latitude_deg" << YAML::Value
+        << gc.latitude * 180 / M_PI << YAML::Key << "tilt_deg" << YAML::Value << gc.tilt * 180 / M_PI
+        << YAML::Key << "rate_rad_s" << YAML::Value << gc.rate << YAML::Key << "fps" << YAML::Value << gc.fps
+        << YAML::Key << "frames" << YAML::Value << frames;
+  truth << YAML::Key << "angular_velocity_rig_rad_s" << YAML::Value;
+  emitVec(truth, s.angularVelocity(0.0));
+  truth << YAML::Key << "linear_velocity_rig_m_s" << YAML::Value;
+  emitVec(truth, s.linearVelocity(0.0));
+  truth << YAML::EndMap;
+  truth << YAML::Key << "gyro" << YAML::Value << YAML::BeginMap << YAML::Key << "rate_hz" << YAML::Value
+        << gc.gyro_rate << YAML::Key << "noise_rad_s" << YAML::Value << gc.gyro_noise << YAML::Key << "bias_rad_s"
+        << YAML::Value;
+  emitVec(truth, gc.gyro_bias);
+  truth << YAML::Key << "bias_walk" << YAML::Value << gc.gyro_bias_walk << YAML::EndMap;
+  emitRig(truth, "rig_true", true_rig);
+  emitRig(truth, "rig_in_camera_info", calib.rig);
+  if (images) emitRealism(truth, c, calib);
+  if (!images) {
+    truth << YAML::Key << "pixel_sigma_px" << YAML::Value << gc.pixel_sigma;
+    truth << YAML::Key << "landmarks_world_m" << YAML::Value << YAML::BeginSeq;
+    for (const auto& p : s.landmarksWorld()) emitVec(truth, p);
+    truth << YAML::EndSeq;
+  }
+  return 0;
+}
+
+// ------------------------------------------------------------------ workpiece
+
+int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet) {
+  const sim::WorkpieceConfig& w = c.workpiece;
+  const sim::RigConfig rc = w.scaledRig();
+  const geometry::StereoRig true_rig = rc.makeRig();
+  const sim::PerturbedCalibration calib = sim::perturbCalibration(true_rig, c.images.perturbation, c.seed);
+
+  // World = plate frame (top surface z = 0). The rig axis points down at the plate centre, tilted about x.
+  Eigen::Isometry3d T_W_rig = Eigen::Isometry3d::Identity();
+  T_W_rig.linear() = geometry::so3Exp(Eigen::Vector3d(M_PI + w.tilt, 0.0, 0.0));
+  T_W_rig.translation() = -T_W_rig.linear() * Eigen::Vector3d(0.0, 0.0, w.working_distance);
+  const Eigen::Isometry3d T_W_L = T_W_rig * rc.poseRigLeft();
+  const Eigen::Isometry3d T_L_W = T_W_L.inverse();
+  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
+                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
+
+  std::vector<Eigen::Vector3d> corners;
+  for (double sx : {-0.5, 0.5})
+    for (double sy : {-0.5, 0.5}) corners.push_back(T_L_W * Eigen::Vector3d(sx * w.plate_size.x(), sy * w.plate_size.y(), 0));
+  for (const auto& X : corners) {
+    Eigen::Vector2d uvl, uvr;
+    if (!true_rig.project(X, &uvl, &uvr) || !true_rig.left().inImage(uvl) || !true_rig.right().inImage(uvr))
+      throw sim::SimConfigError("workpiece.plate_size_mm",
+                                "field 'workpiece.plate_size_mm': the plate is not inside both camera images at "
+                                "working distance " + std::to_string(w.working_distance * 1e3) +
+                                    " mm; make it smaller or move the rig away");
+  }
+  stereo::RectifiedPair info;
+  try {
+    info = stereo::rectifyStereo(calib.rig, corners);
+  } catch (const std::runtime_error& e) {
+    throw sim::SimConfigError("workpiece", e.what());
+  }
+
+  auto t0 = std::chrono::steady_clock::now();
+  const sim::WorkpieceScene scene(w.plate_size, w.plateaus, c.seed, w.texel);
+  if (!quiet)
+    std::cout << "  pattern built in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
+              << " s" << std::endl;
+  sim::RenderOptions ro;
+  ro.supersample = c.images.supersample;
+  t0 = std::chrono::steady_clock::now();
+  const cv::Mat left = sim::renderIrradiance(scene, true_rig.left(), T_W_L, ro);
+  const cv::Mat right = sim::renderIrradiance(scene, true_rig.right(), T_W_L * T_L_R, ro);
+  if (!quiet)
+    std::cout << "  rendered " << rc.width << "x" << rc.height << " pair (" << ro.supersample << "x" << ro.supersample
+              << " samples) in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
+              << " s" << std::endl;
+  Progress progress("exposures", frames, quiet);
+  for (int k = 0; k < frames; ++k) {
+    const ros::Time stamp = kStart + ros::Duration(k / w.fps);
+    const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
+    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
+    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
+    bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+    bag.write("stereo/right/image_raw", stamp,
+              toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
+    bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
+    progress.tick(k + 1);
+  }
+
+  // Ground truth in the left optical frame.
+  const Eigen::Vector3d n_L = T_L_W.linear() * Eigen::Vector3d::UnitZ();
+  truth << YAML::Key << "plate" << YAML::Value << YAML::BeginMap;
+  truth << YAML::Key << "size_mm" << YAML::Value;
+  emitVec(truth, w.plate_size * 1e3);
+  truth << YAML::Key << "plane_left" << YAML::Value;  // n . X + d = 0, n towards the rig
+  const Eigen::Vector3d n_towards = n_L.z() < 0 ? n_L : Eigen::Vector3d(-n_L);
+  emitVec(truth, Eigen::Vector4d(n_towards.x(), n_towards.y(), n_towards.z(), -n_towards.dot(T_L_W.translation())));
+  truth << YAML::Key << "pose_world_left" << YAML::Value << YAML::BeginMap << YAML::Key << "translation_m"
+        << YAML::Value;
+  emitVec(truth, T_W_L.translation());
+  truth << YAML::Key << "quaternion_wxyz" << YAML::Value;
+  emitVec(truth, geometry::toWxyz(Eigen::Quaterniond(T_W_L.linear())));
+  truth << YAML::EndMap << YAML::EndMap;
+  truth << YAML::Key << "plateaus" << YAML::Value << YAML::BeginSeq;
+  for (size_t i = 0; i < w.plateaus.size(); ++i) {
+    const auto& p = w.plateaus[i];
+    truth << YAML::BeginMap;
+    truth << YAML::Key << "id" << YAML::Value << i;
+    truth << YAML::Key << "height_mm" << YAML::Value << p.height * 1e3;
+    truth << YAML::Key << "area_mm2" << YAML::Value << p.size.x() * p.size.y() * 1e6;
+    truth << YAML::Key << "size_mm" << YAML::Value;
+    emitVec(truth, p.size * 1e3);
+    truth << YAML::Key << "centre_plate_mm" << YAML::Value;
+    emitVec(truth, p.centre * 1e3);
+    truth << YAML::Key << "centroid_left_m" << YAML::Value;  // centre of the top face
+    emitVec(truth, T_L_W * Eigen::Vector3d(p.centre.x(), p.centre.y(), p.height));
+    truth << YAML::EndMap;
+  }
+  truth << YAML::EndSeq;
+  truth << YAML::Key << "working_distance_mm" << YAML::Value << w.working_distance * 1e3;
+  truth << YAML::Key << "tilt_deg" << YAML::Value << w.tilt * 180 / M_PI;
+  truth << YAML::Key << "resolution_scale" << YAML::Value << w.resolution_scale;
+  truth << YAML::Key << "rectification_alpha" << YAML::Value << info.alpha;
+  emitRig(truth, "rig_true", true_rig);
+  emitRig(truth, "rig_in_camera_info", calib.rig);
+  emitRealism(truth, c, calib);
+  return 0;
+}
+
+bool parseArgs(int argc, char** argv, Options* o) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    } else if (a == "--out" && has_value) {
+      o->out = argv[++i];
+    } else if (a == "--config" && has_value) {
+      o->config = argv[++i];
+    } else if ((a == "--seed" || a == "--frames") && has_value) {
+      const std::string v = argv[++i];
+      char* end = nullptr;
+      const long long n = std::strtoll(v.c_str(), &end, 10);
+      if (v.empty() || *end != '\0' || n < (a == "--seed" ? 0 : 1)) {
+        std::cerr << "make_dataset: " << a << " takes a whole number" << (a == "--seed" ? " >= 0" : " >= 1")
+                  << ", got '" << v << "'\n";
+        return false;
+      }
+      if (a == "--seed")
+        o->seed = n;
+      else
+        o->frames = static_cast<int>(std::min<long long>(n, 1 << 30));
+    } else if (a == "--ideal") {
+      o->ideal = true;
+    } else if (a == "--quiet") {
+      o->quiet = true;
+    } else if (a.rfind("__", 0) == 0) {
+      // roslaunch/rosrun remapping arguments: ignore.
+    } else if (a[0] != '-' && o->kind.empty()) {
+      o->kind = a;
+    } else {
+      std::cerr << "make_dataset: unknown or incomplete argument '" << a << "'\n";
+      return false;
+    }
+  }
+  if (o->kind.empty() || o->out.empty()) {
+    std::cerr << "make_dataset: KIND and --out FILE.bag are required\n";
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  if (!parseArgs(argc, argv, &o)) {
+    std::cerr << kUsage;
+    return 2;
+  }
+  sim::DatasetConfig c;
+  int frames = 0;
+  try {
+    c = sim::defaultDatasetConfig(sim::parseDatasetKind(o.kind));
+    if (!o.config.empty()) {
+      std::ifstream in(o.config);
+      if (!in) throw sim::SimConfigError("--config", "cannot read config file '" + o.config + "'");
+      std::stringstream ss;
+      ss << in.rdbuf();
+      sim::applyDatasetYaml(&c, ss.str(), o.config);
+    }
+    if (o.seed >= 0) c.seed = static_cast<std::uint64_t>(o.seed);
+    if (o.ideal) sim::makeIdeal(&c);
+    sim::validateDatasetConfig(c);
+    frames = c.kind == sim::DatasetKind::Workpiece ? c.workpiece.frames : c.globe.frames;
+    if (o.frames > 0) frames = std::min(frames, o.frames);
+  } catch (const sim::SimConfigError& e) {
+    std::cerr << "make_dataset: " << (o.config.empty() ? "" : o.config + ": ") << e.what() << "\n";
+    return 1;
+  }
+
+  const auto t0 = std::chrono::steady_clock::now();
+  rosbag::Bag bag;
+  try {
+    bag.open(o.out, rosbag::bagmode::Write);
+  } catch (const std::exception& e) {
+    std::cerr << "make_dataset: cannot write '" << o.out << "': " << e.what() << "\n";
+    return 3;
+  }
+  if (!o.quiet)
+    std::cout << "make_dataset: " << o.kind << ", seed " << c.seed << ", " << frames << " frames -> " << o.out
+              << std::endl;
+  YAML::Emitter truth;
+  truth.SetDoublePrecision(12);
+  truth << YAML::Comment("skin3d simulated dataset ground truth (SI units unless the key says mm/deg/px)");
+  truth << YAML::BeginMap;
+  truth << YAML::Key << "kind" << YAML::Value << o.kind << YAML::Key << "seed" << YAML::Value << c.seed;
+  truth << YAML::Key << "frames" << YAML::Value << frames;
+  truth << YAML::Key << "config" << YAML::Value << (o.config.empty() ? std::string("(defaults)") : o.config);
+  truth << YAML::Key << "world_frame" << YAML::Value
+        << (c.kind == sim::DatasetKind::Workpiece ? "plate frame (top surface z = 0)"
+                                                  : "left optical frame at t = 0");
+  int rc = 0;
+  try {
+    if (c.kind == sim::DatasetKind::Workpiece)
+      rc = makeWorkpiece(c, frames, bag, truth, o.quiet);
+    else
+      rc = makeGlobe(c, frames, bag, truth, o.quiet);
+  } catch (const sim::SimConfigError& e) {
+    bag.close();
+    std::remove(o.out.c_str());
+    std::cerr << "make_dataset: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    bag.close();
+    std::cerr << "make_dataset: failed while writing '" << o.out << "': " << e.what() << "\n";
+    return 3;
+  }
+  truth << YAML::EndMap;
+  bag.close();
+  const std::string tpath = truthPath(o.out);
+  if (!writeText(tpath, std::string(truth.c_str()) + "\n")) {
+    std::cerr << "make_dataset: cannot write " << tpath << "\n";
+    return 3;
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!o.quiet)
+    std::cout << "make_dataset: wrote " << o.out << " (" << fileSize(o.out) / 1e6 << " MB) and " << tpath << " in "
+              << secs << " s" << std::endl;
+  return rc;
+}

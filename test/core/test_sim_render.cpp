@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <functional>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -312,6 +313,72 @@ TEST(SimRender, BackgroundWhereNothingIsHitAndShading) {
   }
 }
 
+/** The plane z = 1 (world), seen from the origin; albedo = x or y of the hit point (test hook for rays). */
+class RayProbe : public Scene {
+ public:
+  explicit RayProbe(int axis) : axis_(axis) {}
+  bool intersect(const Eigen::Vector3d& o, const Eigen::Vector3d& d, Hit* hit) const override {
+    if (d.z() <= 0) return false;
+    hit->distance = (1.0 - o.z()) / d.z();
+    hit->point = o + hit->distance * d;
+    hit->normal = -Eigen::Vector3d::UnitZ();
+    return true;
+  }
+  float albedo(const Hit& hit) const override { return static_cast<float>(hit.point[axis_]); }
+
+ private:
+  int axis_;
+};
+
+TEST(SimRender, SampleRaysAreCameraUnprojectOfTheSubPixelGrid) {
+  // Pixel value = mean over the s x s sub-pixel grid (u + (i + 0.5)/s - 0.5, ...) of the ray's x (or y) at
+  // z = 1, i.e. of camera.unproject: checks the sample positions, the pixel-centre convention and the
+  // renderer's own (warm-started) undistortion against PinholeCamera::unproject, for a strongly distorted
+  // camera and any number of threads.
+  const PinholeCamera cam = makeCamera(300, 80, 60, {-0.3, 0.1, 0.002, -0.001, 0.01});
+  RenderOptions o;
+  o.ambient = 1.0;
+  for (int s : {1, 3}) {
+    for (int threads : {1, 2}) {
+      o.supersample = s;
+      o.threads = threads;
+      for (int axis : {0, 1}) {
+        const cv::Mat img = renderIrradiance(RayProbe(axis), cam, Eigen::Isometry3d::Identity(), o);
+        double worst = 0;
+        for (int v = 0; v < cam.height(); ++v) {
+          for (int u = 0; u < cam.width(); ++u) {
+            double mean = 0;
+            for (int j = 0; j < s; ++j) {
+              for (int i = 0; i < s; ++i) {
+                const Eigen::Vector2d uv(u + (i + 0.5) / s - 0.5, v + (j + 0.5) / s - 0.5);
+                mean += cam.unproject(uv)[axis] / (s * s);
+              }
+            }
+            worst = std::max(worst, std::abs(img.at<float>(v, u) - mean));
+          }
+        }
+        EXPECT_LT(worst, 1e-6) << "s " << s << " threads " << threads << " axis " << axis;
+      }
+    }
+  }
+}
+
+class Throwing : public RayProbe {
+ public:
+  Throwing() : RayProbe(0) {}
+  float albedo(const Hit& hit) const override {
+    if (hit.point.x() > 0.1) throw std::runtime_error("boom");
+    return 0.5f;
+  }
+};
+
+TEST(SimRender, ExceptionInTheSceneReachesTheCaller) {
+  RenderOptions o;
+  o.threads = 2;
+  EXPECT_THROW(renderIrradiance(Throwing(), makeCamera(100, 64, 48), Eigen::Isometry3d::Identity(), o),
+               std::runtime_error);
+}
+
 // ============================================================================ (2) consistency between views
 
 TEST(SimRender, SphereTextureIsOnTheSurfaceBothViewsAgree) {
@@ -364,6 +431,26 @@ TEST(SimRender, SphereTextureIsOnTheSurfaceBothViewsAgree) {
   EXPECT_LT(mean, 5e-4);
   EXPECT_LT(max, 3e-3);
   EXPECT_GT(mean_shift, 5 * mean) << "a 3.6 px wrong correspondence must be clearly worse";
+}
+
+TEST(SimRender, GlobeTextureTurnsWithTheGlobe) {
+  // Turning the globe by R about its centre and moving the camera around the centre by the same R must give
+  // the same image (no shading: ambient 1); a texture fixed in the world would not.
+  const Eigen::Vector3d c(0.01, 0.02, 0.3);
+  SphereScene globe(c, 0.1, 5, 0.5e-3);
+  const PinholeCamera cam = makeCamera(500, 160, 120);
+  RenderOptions o;
+  o.ambient = 1.0;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.9, Eigen::Vector3d(0.2, 1.0, 0.3).normalized()).toRotationMatrix();
+  const cv::Mat a = renderIrradiance(globe, cam, Eigen::Isometry3d::Identity(), o);
+  globe.setOrientation(R);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = R;
+  T.translation() = c - R * c;
+  const cv::Mat b = renderIrradiance(globe, cam, T, o);
+  const cv::Mat moved_camera_only = renderIrradiance(SphereScene(c, 0.1, 5, 0.5e-3), cam, T, o);
+  EXPECT_LT(cv::norm(a, b, cv::NORM_INF), 1e-4);
+  EXPECT_GT(cv::norm(a, moved_camera_only, cv::NORM_L1) / a.total(), 0.02);
 }
 
 // ============================================================================ (3) edge position

@@ -116,7 +116,7 @@ struct RealismOptions {
   double gamma = 1.0;             //!< output = (gain * E + offset)^(1/gamma)
   double full_well = 8000.0;      //!< electrons at intensity 1 (shot noise variance = E * full_well); 0 = none
   double read_noise = 1.5;        //!< DN (of 255), Gaussian; 0 = none
-  bool quantise = true;           //!< 8-bit output (always 8-bit in renderImage; false keeps float in renderFloat)
+  bool quantise = true;           //!< true: CV_8UC1 output; false: the clamped CV_32F image in [0, 1] (tests)
   static RealismOptions ideal();
 };
 
@@ -137,7 +137,7 @@ cv::Mat renderIrradiance(const Scene& scene, const geometry::PinholeCamera& came
 
 /**
  * @brief Applies the realism chain to an irradiance image: blur, vignetting, gain/offset/gamma, shot and
- * read noise (random numbers from `seed`), then quantises to CV_8UC1.
+ * read noise (random numbers from `seed`), then clamps to [0, 1] and quantises to CV_8UC1 (unless !quantise).
  */
 cv::Mat applyRealism(const cv::Mat& irradiance, const RealismOptions& realism, std::uint64_t seed);
 

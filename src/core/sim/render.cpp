@@ -6,9 +6,11 @@
 // is the mean of s x s samples at (u + (i + 0.5)/s - 0.5, v + (j + 0.5)/s - 0.5), i, j = 0 .. s-1. A sample's
 // ray leaves the camera centre T_world_cam.translation() along R_world_cam * normalized(camera.unproject(uv))
 // (the camera's plumb_bob distortion is inverted exactly: Newton iterations, warm-started from the previous
-// sample, to 1e-14 in normalised coordinates, i.e. the same ray as camera.unproject). A hit contributes
-// albedo * (ambient + (1 - ambient) max(0, -n . light_dir)), a miss `background`. Rows are shared out to
-// `threads` std::threads; the result does not depend on the number of threads.
+// sample of the same row, until a step is < 1e-9, leaving an error ~1e-17 in normalised coordinates, i.e. the
+// same ray as camera.unproject). A hit contributes albedo * (ambient + (1 - ambient) max(0, -n . light_dir)),
+// a miss `background`; the pixel value is the mean of its samples. Rows are shared out to `threads`
+// std::threads (0 = hardware concurrency); the result does not depend on the number of threads. An exception
+// thrown by the scene in a worker is rethrown to the caller.
 //
 // applyRealism, in this order, on a CV_32FC1 irradiance E:
 //   1. blur:       Gaussian, sigma = blur_sigma px (cv::GaussianBlur, BORDER_REFLECT_101); skipped if 0.
@@ -26,6 +28,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <exception>
+#include <mutex>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -63,6 +67,9 @@ class RayMaker {
     const std::vector<double>& D = cam.D();
     for (std::size_t i = 0; i < 5 && i < D.size(); ++i) d_[i] = D[i];
   }
+
+  /** Forgets the warm start (at the start of each row, so that a row's rays do not depend on the thread). */
+  void reset() { cx_ = cy_ = 0.0; }
 
   /** Ray (x, y, 1) of pixel (u, v). */
   Eigen::Vector3d ray(double u, double v) {
@@ -183,35 +190,45 @@ cv::Mat renderIrradiance(const Scene& scene, const geometry::PinholeCamera& came
   int n_threads = options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
   n_threads = std::max(1, std::min(n_threads, H));
   std::atomic<int> next_row{0};
+  std::mutex error_mutex;
+  std::exception_ptr error;
   auto work = [&]() {
     RayMaker rays(camera);
     Hit hit;
-    for (;;) {
-      const int v = next_row.fetch_add(1);
-      if (v >= H) return;
-      float* row = out.ptr<float>(v);
-      for (int u = 0; u < W; ++u) {
-        double sum = 0.0;
-        for (int j = 0; j < s; ++j) {
-          const double sv = v + off[j];
-          for (int i = 0; i < s; ++i) {
-            const Eigen::Vector3d d = R * rays.ray(u + off[i], sv).normalized();
-            if (scene.intersect(origin, d, &hit)) {
-              const double lambert = std::max(0.0, -hit.normal.dot(light));
-              sum += scene.albedo(hit) * (ambient + (1.0 - ambient) * lambert);
-            } else {
-              sum += background;
+    try {
+      for (;;) {
+        const int v = next_row.fetch_add(1);
+        if (v >= H) return;
+        rays.reset();
+        float* row = out.ptr<float>(v);
+        for (int u = 0; u < W; ++u) {
+          double sum = 0.0;
+          for (int j = 0; j < s; ++j) {
+            const double sv = v + off[j];
+            for (int i = 0; i < s; ++i) {
+              const Eigen::Vector3d d = R * rays.ray(u + off[i], sv).normalized();
+              if (scene.intersect(origin, d, &hit)) {
+                const double lambert = std::max(0.0, -hit.normal.dot(light));
+                sum += scene.albedo(hit) * (ambient + (1.0 - ambient) * lambert);
+              } else {
+                sum += background;
+              }
             }
           }
+          row[u] = static_cast<float>(sum * inv_n);
         }
-        row[u] = static_cast<float>(sum * inv_n);
       }
+    } catch (...) {
+      next_row = H;  // stop the other workers
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
     }
   };
   std::vector<std::thread> pool;
   for (int i = 1; i < n_threads; ++i) pool.emplace_back(work);
   work();
   for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
   return out;
 }
 

@@ -10,11 +10,16 @@
 // latitude pi/2 - (i + 0.5) pi / H (north up) and longitude -pi + (j + 0.5) 2 pi / W. Bilinear lookup
 // wraps in longitude and clamps in latitude (within half a texel of a pole the value is that of the
 // nearest texel row: a blemish of < 1 texel at the poles). The texture is evaluated at the 3D surface
-// point, so it is seamless and undistorted: see globeTexture().
+// point (body frame), so it is seamless and undistorted. Content (GlobeTexture): "continents" where a
+// low-frequency fBm (150 ... 19 mm, perturbed by a 20 ... 1.3 mm "coast" fBm) exceeds 0.52 (smooth step):
+// ocean albedo ~0.22, land ~0.62, both modulated by relief detail at 12 ... 0.75 mm and grain at 4 ... 1 mm.
 //
 // Workpiece map: nx x ny texels over the plate (nx = ceil(plate_x / texel), texel sizes plate / n), row i
 // at y = -plate_y/2 + (i + 0.5) ty, column j at x = -plate_x/2 + (j + 0.5) tx; bilinear lookup clamps
-// at the plate border. Content: see buildWorkpieceMap().
+// at the plate border. Content ("drawn random pattern"): paper of contrast-stretched fBm (3 ... 0.09 mm) with a
+// slow 12 ... 3 mm shading, overdrawn with marker strokes (0.09 per mm^2: smooth random curves 1 ... 9 mm long,
+// 0.06 ... 0.41 mm wide, ink darkness 0.55 ... 0.92, anti-aliased) and dots (0.06 per mm^2, 0.12 ... 0.5 mm),
+// all generated from the seed. Plateau walls take the texture at their (x, y).
 
 #include <algorithm>
 #include <atomic>
@@ -42,7 +47,7 @@ std::string num(double v) {
   return s.str();
 }
 
-/** Runs f(row) for row in [0, rows) on `threads` threads (0 = hardware concurrency), chunks of rows. */
+/** Runs f(r0, r1) over [0, rows) in chunks of `chunk` rows on hardware_concurrency() threads. */
 template <typename F>
 void parallelRows(int rows, int chunk, F&& f) {
   const int hw = static_cast<int>(std::thread::hardware_concurrency());
@@ -61,7 +66,7 @@ void parallelRows(int rows, int chunk, F&& f) {
   for (auto& t : pool) t.join();
 }
 
-/** atan(x) for x >= 0 (Cephes' rational approximation, |error| < 1e-15; ~2x faster than std::atan2). */
+/** atan(x) for x >= 0 (Cephes' rational approximation, |error| < 1e-15; cheaper than std::atan2 here). */
 inline double atanPositive(double x) {
   constexpr double P0 = -8.750608600031904122785E-1, P1 = -1.615753718733365076637E1, P2 = -7.500855792314704667340E1,
                    P3 = -1.228866684490136173410E2, P4 = -6.485021904942025371773E1;
@@ -121,7 +126,7 @@ struct GlobeTexture {
     fine = NoiseTexture{0.004, 3, 0.7, mix(seed, 4)};       // fine grain: 4 mm ... 1 mm
   }
   float operator()(const Eigen::Vector3d& q) const {
-    // Land where the low-frequency noise (plus a fractal coast perturbation) exceeds 0.5: about 40 %.
+    // Land where the low-frequency noise plus a fractal coast perturbation exceeds ~0.52.
     const double c = continents.at(q) + 0.35 * (coast.at(q) - 0.5);
     const double land = smoothstep(0.515, 0.525, c);
     const double d = detail.at(q) - 0.5;

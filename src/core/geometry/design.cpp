@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
+#include "../common/text.h"
 #include "skin3d/geometry/design.h"
 
 #include <Eigen/Eigenvalues>
@@ -16,12 +17,7 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(10);
-  os << v;
-  return os.str();
-}
+using common::num;
 
 [[noreturn]] void fail(const std::string& field, const std::string& value, const std::string& why) {
   throw DesignConfigError(field, "field '" + field + "' = " + value + ": " + why);

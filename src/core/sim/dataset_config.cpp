@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "../common/yaml_section.h"
+#include "../common/text.h"
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
 
@@ -16,12 +17,7 @@ namespace {
 using Section = common::YamlSection<SimConfigError>;
 constexpr double kDeg = M_PI / 180.0;
 
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(10);
-  os << v;
-  return os.str();
-}
+using common::num;
 
 [[noreturn]] void bad(const std::string& field, double value, const std::string& why) {
   throw SimConfigError(field, "field '" + field + "' = " + num(value) + ": " + why);

@@ -28,6 +28,7 @@
 //    per purpose, keyed by a hash of (seed, purpose[, frame k, landmark id]): measure(k) is the same whatever
 //    the call order, and a landmark's noise in frame k does not depend on which other landmarks are visible.
 
+#include "../common/text.h"
 #include "skin3d/sim/globe.h"
 
 #include <Eigen/Geometry>
@@ -46,11 +47,7 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
 // ------------------------------------------------------------------------------------------- messages
-std::string num(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), "%.10g", v);
-  return buf;
-}
+using common::num;
 
 std::string vec(const Eigen::Vector3d& v, double scale) {
   return "[" + num(v.x() * scale) + ", " + num(v.y() * scale) + ", " + num(v.z() * scale) + "]";

@@ -40,6 +40,7 @@
 #include <Eigen/LU>
 #include <opencv2/imgproc.hpp>
 
+#include "../common/text.h"
 #include "skin3d/sim/render.h"
 
 namespace skin3d {
@@ -48,11 +49,7 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+using common::num;
 
 /**
  * Undistorts pixels to ideal normalised coordinates. For a distorted camera: Newton iterations on the

@@ -33,6 +33,7 @@
 #include <thread>
 #include <vector>
 
+#include "../common/text.h"
 #include "skin3d/sim/render.h"
 
 namespace skin3d {
@@ -41,11 +42,7 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+using common::num;
 
 /** Runs f(r0, r1) over [0, rows) in chunks of `chunk` rows on hardware_concurrency() threads. */
 template <typename F>

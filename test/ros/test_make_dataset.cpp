@@ -309,6 +309,31 @@ TEST(MakeDataset, GlobeImagesViewsAgreeAndSilhouetteMatchesCameraInfo) {
   EXPECT_GE(inside_fg, 0.9 * tested);
 }
 
+TEST(MakeDataset, DistortedLensesAreConsistentWithTheirCameraInfo) {
+  // Images rendered through a distorted lens, compared through the bag's camera_info (K and D).
+  const std::string cfg = tmp("dist.yaml");
+  std::ofstream(cfg) << "rig: {distortion: [-0.15, 0.04, 0.001, -0.0008, 0]}\n";
+  const std::string bag = tmp("dist.bag");
+  ASSERT_EQ(run("globe-images --quiet --ideal --frames 1 --config " + cfg + " --out " + bag), 0);
+  const auto li = read<sensor_msgs::CameraInfo>(bag, "stereo/left/camera_info");
+  ASSERT_EQ(li[0].D.size(), 5u);
+  EXPECT_DOUBLE_EQ(li[0].D[0], -0.15);
+  const YAML::Node truth = YAML::LoadFile(tmp("dist.truth.yaml"));
+  const Eigen::Vector3d c = toIso(read<geometry_msgs::PoseStamped>(bag, "ground_truth/pose")[0]).inverse() *
+                            vec3(truth["sphere"]["centre_world_m"]);
+  const double radius = truth["sphere"]["radius_m"].as<double>();
+  const Eigen::Vector3d right_centre = vec3(truth["rig_true"]["right_centre_in_left_m"]);
+  std::vector<Eigen::Vector3d> pts;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> nd(0, 1);
+  while (pts.size() < 3000) {
+    const Eigen::Vector3d n = Eigen::Vector3d(nd(rng), nd(rng), nd(rng)).normalized();
+    const Eigen::Vector3d X = c + radius * n;
+    if (n.dot(-X.normalized()) > 0.5 && n.dot((right_centre - X).normalized()) > 0.5) pts.push_back(X);
+  }
+  expectViewsAgree(bag, pts, 4.0, 0.9);
+}
+
 TEST(MakeDataset, GlobeImagesRecordTheCalibrationErrorTheyWriteToCameraInfo) {
   const std::string bag = tmp("real.bag");
   ASSERT_EQ(run("globe-images --quiet --frames 1 --seed 5 --out " + bag), 0);

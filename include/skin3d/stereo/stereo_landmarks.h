@@ -1,0 +1,46 @@
+/**
+ * @file stereo_landmarks.h
+ * @brief MMSE triangulation of rectified stereo matches into landmarks in the left optical frame.
+ *
+ * The rectified cameras come from the two CameraInfo's P (left: P_l = [K_l | 0], right: P_r = [K_r | p4],
+ * both in the rectified-left frame); the point is triangulated there with the core's MMSE triangulation
+ * (geometry/triangulation.h, isotropic pixel noise sigma) and rotated back to the raw left optical frame
+ * with R_left^T (CameraInfo R = rectified <- raw), covariance C = R^T C_rect R.
+ *
+ * SPDX-License-Identifier: BSD-3-Clause
+ */
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "skin3d/geometry/camera.h"
+#include "skin3d/stereo/features.h"
+
+namespace skin3d {
+namespace stereo {
+
+struct StereoLandmark {
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();     //!< m, raw left optical frame
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();   //!< m^2
+  std::vector<float> descriptor;
+  float strength = 0.0f;
+  Eigen::Vector2d uv_left = Eigen::Vector2d::Zero(), uv_right = Eigen::Vector2d::Zero();  //!< rectified pixels
+};
+
+struct TriangulateOptions {
+  double sigma_px = 0.5;          //!< pixel localisation error of a matched feature (1 sigma)
+  double min_depth = 0.05;        //!< m; matches triangulated nearer are dropped
+  double max_depth = 5.0;         //!< m; farther ones too (tiny disparity: useless depth)
+};
+
+/**
+ * @brief Triangulates every match; drops (and counts in *dropped) those behind the rig or out of range.
+ * @throws std::invalid_argument if the CameraInfo pair is not a calibrated, rectified stereo pair.
+ */
+std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
+                                               const std::vector<StereoMatch>& matches,
+                                               const TriangulateOptions& options, int* dropped = nullptr);
+
+}  // namespace stereo
+}  // namespace skin3d

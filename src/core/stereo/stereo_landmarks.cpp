@@ -1,0 +1,77 @@
+// SPDX-License-Identifier: BSD-3-Clause
+#include "skin3d/stereo/stereo_landmarks.h"
+
+#include <Eigen/LU>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "skin3d/geometry/triangulation.h"
+
+namespace skin3d {
+namespace stereo {
+
+namespace {
+void checkP(const geometry::CameraInfo& c, const char* side) {
+  const double fx = c.P(0, 0), fy = c.P(1, 1);
+  if (!(fx > 0.0) || !(fy > 0.0) || !c.P.allFinite()) {
+    std::ostringstream os;
+    os << side << " camera_info P[0] = " << fx << ", P[5] = " << fy << ": not a calibrated, rectified camera";
+    throw std::invalid_argument(os.str());
+  }
+  const double orth = (c.R.transpose() * c.R - Eigen::Matrix3d::Identity()).norm();
+  if (!c.R.allFinite() || orth > 1e-6) {
+    std::ostringstream os;
+    os << side << " camera_info R is not a rotation (|R^T R - I| = " << orth << ")";
+    throw std::invalid_argument(os.str());
+  }
+}
+}  // namespace
+
+std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
+                                               const std::vector<StereoMatch>& matches,
+                                               const TriangulateOptions& options, int* dropped) {
+  checkP(left, "left");
+  checkP(right, "right");
+  if (!(options.sigma_px > 0.0)) throw std::invalid_argument("triangulate: sigma_px must be > 0");
+  if (!(options.max_depth > options.min_depth)) throw std::invalid_argument("triangulate: max_depth must be > min_depth");
+  if (std::abs(right.P(0, 3)) <= 0.0)
+    throw std::invalid_argument("right camera_info P[3] (Tx = -fx * baseline) is 0: not a stereo pair");
+
+  // Rectified cameras in the rectified-left frame: P = K [I | t] with t = K^-1 p4.
+  std::vector<geometry::CameraObservation> views(2);
+  views[0].K = left.P.leftCols<3>();
+  views[0].t = views[0].K.inverse() * left.P.col(3);
+  views[1].K = right.P.leftCols<3>();
+  views[1].t = views[1].K.inverse() * right.P.col(3);
+  const Eigen::Matrix2d cov = options.sigma_px * options.sigma_px * Eigen::Matrix2d::Identity();
+  views[0].cov_uv = views[1].cov_uv = cov;
+  const Eigen::Matrix3d Rt = left.R.transpose();  // raw left <- rectified left
+
+  std::vector<StereoLandmark> out;
+  out.reserve(matches.size());
+  int n_dropped = 0;
+  for (const auto& m : matches) {
+    views[0].uv = m.left;
+    views[1].uv = m.right;
+    const geometry::TriangulationResult r = geometry::triangulateMmse(views);
+    if (!r.ok || !(r.X.z() >= options.min_depth) || !(r.X.z() <= options.max_depth)) {
+      ++n_dropped;
+      continue;
+    }
+    StereoLandmark l;
+    l.position = Rt * r.X;
+    l.covariance = Rt * r.C * Rt.transpose();
+    l.covariance = 0.5 * (l.covariance + l.covariance.transpose());
+    l.descriptor = m.descriptor;
+    l.strength = m.strength;
+    l.uv_left = m.left;
+    l.uv_right = m.right;
+    out.push_back(std::move(l));
+  }
+  if (dropped) *dropped = n_dropped;
+  return out;
+}
+
+}  // namespace stereo
+}  // namespace skin3d

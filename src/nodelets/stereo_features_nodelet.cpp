@@ -1,0 +1,162 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * skin3d/stereo_features: feature detection and left-right matching on the rectified pair (core:
+ * stereo/features.h).
+ *
+ * Subscribes: stereo/{left,right}/image_rect (mono8) and stereo/{left,right}/camera_info (for the
+ *             principal-point offset cx_l - cx_r of the rectified P matrices).
+ * Publishes:  stereo/matches (skin3d/StereoMatchArray), stereo/matches_image (bgr8 debug picture, only
+ *             computed while someone subscribes).
+ * Parameters: ~feature_type (kaze | akaze | orb, kaze), ~threshold (0.001), ~max_features (3000),
+ *             ~ratio (0.8), ~max_row_diff (px, 1.5), ~min_disparity (px, 0.5), ~max_disparity (px, 1e9),
+ *             ~cross_check (true), ~queue_size (5), ~approximate_sync (false).
+ * Bad input (empty/black/textureless images, sizes, encodings, no features, no matches) drops the frame
+ * with a throttled warning; the nodelet keeps running.
+ */
+#include <image_transport/image_transport.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <skin3d/StereoMatchArray.h>
+
+#include <memory>
+#include <pluginlib/class_list_macros.hpp>
+
+#include "conversions.h"
+#include "skin3d/stereo/features.h"
+
+namespace skin3d {
+
+using sensor_msgs::CameraInfo;
+using sensor_msgs::Image;
+
+class StereoFeaturesNodelet : public nodelet::Nodelet {
+  using Exact = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
+  using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    stereo::FeatureOptions o;
+    std::string type;
+    pnh.param<std::string>("feature_type", type, "kaze");
+    pnh.param("threshold", o.threshold, o.threshold);
+    pnh.param("max_features", o.max_features, o.max_features);
+    pnh.param("ratio", o.ratio, o.ratio);
+    pnh.param("max_row_diff", o.max_row_diff, o.max_row_diff);
+    pnh.param("min_disparity", o.min_disparity, o.min_disparity);
+    pnh.param("max_disparity", o.max_disparity, o.max_disparity);
+    pnh.param("cross_check", o.cross_check, o.cross_check);
+    try {
+      o.type = stereo::parseFeatureType(type);
+      matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(o);
+    } catch (const std::invalid_argument& e) {
+      NODELET_ERROR("stereo_features: bad parameter: %s; using the defaults (KAZE)", e.what());
+      matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(stereo::FeatureOptions());
+    }
+    type_name_ = stereo::featureTypeName(matcher_->options().type);
+    bool approx = false;
+    int queue = 5;
+    pnh.param("approximate_sync", approx, false);
+    pnh.param("queue_size", queue, 5);
+    queue = std::max(1, queue);
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    pub_matches_ = nh.advertise<skin3d::StereoMatchArray>("stereo/matches", 5);
+    pub_debug_ = it_->advertise("stereo/matches_image", 1);
+    sub_li_.subscribe(nh, "stereo/left/image_rect", queue);
+    sub_lc_.subscribe(nh, "stereo/left/camera_info", queue);
+    sub_ri_.subscribe(nh, "stereo/right/image_rect", queue);
+    sub_rc_.subscribe(nh, "stereo/right/camera_info", queue);
+    if (approx) {
+      approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
+      approx_->registerCallback(&StereoFeaturesNodelet::callback, this);
+    } else {
+      exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
+      exact_->registerCallback(&StereoFeaturesNodelet::callback, this);
+    }
+    NODELET_INFO("stereo_features: %s features, ratio %.2f, row tolerance %.1f px", type_name_.c_str(),
+                 matcher_->options().ratio, matcher_->options().max_row_diff);
+  }
+
+  void callback(const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
+                const CameraInfo::ConstPtr& rc) {
+    std::string problem = ros_conv::checkCameraInfo(*lc, "stereo/left/camera_info");
+    if (problem.empty()) problem = ros_conv::checkCameraInfo(*rc, "stereo/right/camera_info");
+    if (problem.empty()) problem = ros_conv::checkImage(*li, nullptr, "stereo/left/image_rect");
+    if (problem.empty()) problem = ros_conv::checkImage(*ri, nullptr, "stereo/right/image_rect");
+    if (problem.empty() && (li->width != ri->width || li->height != ri->height))
+      problem = "left and right rectified images differ in size";
+    if (!problem.empty()) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_features: dropping frame: %s", problem.c_str());
+      return;
+    }
+    cv::Mat left, right;
+    try {
+      left = ros_conv::toMono8(*li);
+      right = ros_conv::toMono8(*ri);
+    } catch (const std::exception& e) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_features: dropping frame: %s", e.what());
+      return;
+    }
+    stereo::FeatureOptions o = matcher_->options();
+    const double offset = lc->P[2] - rc->P[2];  // cx_l - cx_r of the rectified projections
+    std::vector<stereo::StereoMatch> matches;
+    stereo::MatchStats stats;
+    {
+      if (o.disparity_offset != offset) {
+        o.disparity_offset = offset;
+        matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(o);
+      }
+      matches = matcher_->process(left, right, &stats);
+    }
+    if (stats.left_features == 0 || stats.right_features == 0) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_features: dropping frame: no features found in stereo/%s/image_rect "
+                                 "(black, saturated or textureless image?)",
+                            stats.left_features == 0 ? "left" : "right");
+      return;
+    }
+    if (matches.empty()) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_features: dropping frame: %d / %d features but no match (%d with row "
+                                 "candidates; check the rectification and ~max_row_diff, ~ratio)",
+                            stats.left_features, stats.right_features, stats.candidates);
+      return;
+    }
+    skin3d::StereoMatchArray msg;
+    msg.header = li->header;
+    msg.feature_type = type_name_;
+    msg.matches.reserve(matches.size());
+    for (const auto& m : matches) {
+      skin3d::StereoMatch s;
+      s.u_left = m.left.x();
+      s.v_left = m.left.y();
+      s.u_right = m.right.x();
+      s.v_right = m.right.y();
+      s.descriptor = m.descriptor;
+      s.strength = m.strength;
+      s.size = m.size;
+      msg.matches.push_back(std::move(s));
+    }
+    pub_matches_.publish(msg);
+    if (pub_debug_.getNumSubscribers() > 0) {
+      cv_bridge::CvImage dbg(li->header, sensor_msgs::image_encodings::BGR8, stereo::drawStereoMatches(left, right, matches));
+      pub_debug_.publish(dbg.toImageMsg());
+    }
+  }
+
+  std::unique_ptr<stereo::StereoFeatureMatcher> matcher_;
+  std::string type_name_;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  ros::Publisher pub_matches_;
+  image_transport::Publisher pub_debug_;
+  message_filters::Subscriber<Image> sub_li_, sub_ri_;
+  message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
+  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
+  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+};
+
+}  // namespace skin3d
+
+PLUGINLIB_EXPORT_CLASS(skin3d::StereoFeaturesNodelet, nodelet::Nodelet)

@@ -1,0 +1,130 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * skin3d/stereo_rectify: synchronised rectification of a stereo pair from its camera_info (K, D, R, P).
+ *
+ * Subscribes: stereo/{left,right}/image_raw, stereo/{left,right}/camera_info.
+ * Publishes:  stereo/{left,right}/image_rect (mono8, rectified), stereo/{left,right}/camera_info_rect
+ *             (K = P[0:3,0:3], D = 0, R = I, P unchanged).
+ * Parameters: ~approximate_sync (bool, false): ApproximateTime instead of ExactTime;
+ *             ~queue_size (int, 5); ~max_stamp_diff (double s, 0.005): with approximate sync, pairs
+ *             further apart are dropped; ~interpolation (int, 1 = linear, cv::InterpolationFlags).
+ * Bad input (sizes, encodings, uncalibrated camera_info, frame_id or stamp mismatch) drops that frame
+ * with a throttled warning naming the topic; the nodelet keeps running.
+ */
+#include <image_geometry/pinhole_camera_model.h>
+#include <image_transport/image_transport.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+
+#include <memory>
+#include <mutex>
+#include <pluginlib/class_list_macros.hpp>
+
+#include "conversions.h"
+
+namespace skin3d {
+
+using sensor_msgs::CameraInfo;
+using sensor_msgs::Image;
+
+class StereoRectifyNodelet : public nodelet::Nodelet {
+  using Exact = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
+  using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    bool approx = false;
+    int queue = 5;
+    pnh.param("approximate_sync", approx, false);
+    pnh.param("queue_size", queue, 5);
+    pnh.param("max_stamp_diff", max_stamp_diff_, 0.005);
+    pnh.param("interpolation", interpolation_, 1);
+    if (queue < 1) {
+      NODELET_WARN("stereo_rectify: ~queue_size = %d must be >= 1; using 5", queue);
+      queue = 5;
+    }
+    if (nh.getNamespace() == "/")
+      NODELET_WARN("stereo_rectify: started in the global namespace; topics are stereo/...; usually it runs in a rig namespace");
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    pub_left_ = it_->advertise("stereo/left/image_rect", 1);
+    pub_right_ = it_->advertise("stereo/right/image_rect", 1);
+    pub_left_info_ = nh.advertise<CameraInfo>("stereo/left/camera_info_rect", 1);
+    pub_right_info_ = nh.advertise<CameraInfo>("stereo/right/camera_info_rect", 1);
+    sub_li_.subscribe(nh, "stereo/left/image_raw", queue);
+    sub_lc_.subscribe(nh, "stereo/left/camera_info", queue);
+    sub_ri_.subscribe(nh, "stereo/right/image_raw", queue);
+    sub_rc_.subscribe(nh, "stereo/right/camera_info", queue);
+    if (approx) {
+      approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
+      approx_->registerCallback(&StereoRectifyNodelet::callback, this);
+    } else {
+      exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
+      exact_->registerCallback(&StereoRectifyNodelet::callback, this);
+    }
+  }
+
+  void callback(const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
+                const CameraInfo::ConstPtr& rc) {
+    std::string problem = ros_conv::checkCameraInfo(*lc, "stereo/left/camera_info");
+    if (problem.empty()) problem = ros_conv::checkCameraInfo(*rc, "stereo/right/camera_info");
+    if (problem.empty()) problem = ros_conv::checkImage(*li, lc.get(), "stereo/left/image_raw");
+    if (problem.empty()) problem = ros_conv::checkImage(*ri, rc.get(), "stereo/right/image_raw");
+    if (problem.empty() && (li->width != ri->width || li->height != ri->height))
+      problem = "left and right images differ in size (" + std::to_string(li->width) + "x" + std::to_string(li->height) +
+                " vs " + std::to_string(ri->width) + "x" + std::to_string(ri->height) + ")";
+    if (problem.empty() && li->header.frame_id == ri->header.frame_id)
+      problem = "left and right images have the same frame_id '" + li->header.frame_id + "'";
+    if (problem.empty() && std::abs((li->header.stamp - ri->header.stamp).toSec()) > max_stamp_diff_)
+      problem = "left/right stamps differ by " + std::to_string((li->header.stamp - ri->header.stamp).toSec()) +
+                " s (> ~max_stamp_diff)";
+    if (!problem.empty()) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_rectify: dropping frame: %s", problem.c_str());
+      return;
+    }
+    try {
+      std::lock_guard<std::mutex> lock(mutex_);
+      left_model_.fromCameraInfo(lc);  // caches the maps while the camera_info does not change
+      right_model_.fromCameraInfo(rc);
+      publish(*li, left_model_, pub_left_, pub_left_info_, *lc);
+      publish(*ri, right_model_, pub_right_, pub_right_info_, *rc);
+    } catch (const std::exception& e) {
+      NODELET_WARN_THROTTLE(2.0, "stereo_rectify: dropping frame: %s", e.what());
+    }
+  }
+
+  void publish(const Image& raw, const image_geometry::PinholeCameraModel& model, image_transport::Publisher& pub,
+               ros::Publisher& pub_info, const CameraInfo& info) {
+    const cv::Mat gray = ros_conv::toMono8(raw);
+    cv_bridge::CvImage out;
+    out.header = raw.header;
+    out.encoding = sensor_msgs::image_encodings::MONO8;
+    model.rectifyImage(gray, out.image, interpolation_);
+    pub.publish(out.toImageMsg());
+    CameraInfo rect = info;
+    for (int i = 0; i < 9; ++i) rect.K[i] = info.P[(i / 3) * 4 + i % 3];
+    rect.D.assign(info.D.size(), 0.0);
+    rect.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    pub_info.publish(rect);
+  }
+
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::Publisher pub_left_, pub_right_;
+  ros::Publisher pub_left_info_, pub_right_info_;
+  message_filters::Subscriber<Image> sub_li_, sub_ri_;
+  message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
+  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
+  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+  image_geometry::PinholeCameraModel left_model_, right_model_;
+  std::mutex mutex_;
+  double max_stamp_diff_ = 0.005;
+  int interpolation_ = 1;
+};
+
+}  // namespace skin3d
+
+PLUGINLIB_EXPORT_CLASS(skin3d::StereoRectifyNodelet, nodelet::Nodelet)

@@ -1,0 +1,134 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Triangulation of rectified matches back into the raw left optical frame.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "skin3d/geometry/quaternion.h"
+#include "skin3d/stereo/rectification.h"
+#include "skin3d/stereo/stereo_landmarks.h"
+
+using namespace skin3d;
+
+namespace {
+Eigen::Matrix3d makeK(double f, double cx, double cy) {
+  Eigen::Matrix3d K;
+  K << f, 0, cx, 0, f, cy, 0, 0, 1;
+  return K;
+}
+
+// A raw rig (slightly rotated right camera, distortion) and its rectification.
+struct Fixture {
+  geometry::StereoRig rig;
+  stereo::RectifiedPair pair;
+  Fixture(bool converged) {
+    const geometry::PinholeCamera cam(makeK(800.0, 319.5, 239.5), 640, 480, {-0.1, 0.02, 0.0, 0.0, 0.0});
+    if (converged) {
+      const double a = 30.0 * M_PI / 180.0;
+      rig = geometry::StereoRig::fromRightPose(cam, cam, geometry::so3Exp(Eigen::Vector3d(0, -a, 0)),
+                                               geometry::so3Exp(Eigen::Vector3d(0, -a / 2, 0)) * Eigen::Vector3d(0.15, 0, 0));
+      std::vector<Eigen::Vector3d> poi;
+      for (double x = -0.03; x <= 0.031; x += 0.03)
+        for (double y = -0.03; y <= 0.031; y += 0.03) poi.push_back(Eigen::Vector3d(0.075 + x, y, 0.28));
+      pair = stereo::rectifyStereo(rig, poi);
+    } else {
+      rig = geometry::StereoRig::fromRightPose(cam, cam, geometry::so3Exp(Eigen::Vector3d(0.003, -0.01, 0.002)),
+                                               Eigen::Vector3d(0.105, 0.0, 0.015));
+      pair = stereo::rectifyStereo(rig);
+    }
+  }
+  // A rectified match of a left-frame point.
+  stereo::StereoMatch match(const Eigen::Vector3d& X) const {
+    stereo::StereoMatch m;
+    m.left = stereo::projectRectified(pair, X, false);
+    m.right = stereo::projectRectified(pair, X, true);
+    m.descriptor = {1.0f, 2.0f};
+    m.strength = 0.5f;
+    return m;
+  }
+};
+
+void expectRoundTrip(const Fixture& f, const std::vector<Eigen::Vector3d>& pts) {
+  std::vector<stereo::StereoMatch> matches;
+  for (const auto& X : pts) matches.push_back(f.match(X));
+  int dropped = -1;
+  const auto lms = stereo::triangulateMatches(f.pair.left, f.pair.right, matches, {}, &dropped);
+  ASSERT_EQ(lms.size(), pts.size());
+  EXPECT_EQ(dropped, 0);
+  for (size_t i = 0; i < pts.size(); ++i) {
+    EXPECT_LT((lms[i].position - pts[i]).norm(), 1e-9);
+    // The covariance is that of the raw rig's own MMSE triangulation of the same (noise-free) point.
+    Eigen::Vector2d uvl, uvr;
+    ASSERT_TRUE(f.rig.project(pts[i], &uvl, &uvr));
+    const auto direct = geometry::triangulateMmse([&] {
+      std::vector<geometry::CameraObservation> v(2);
+      v[0].K = f.pair.left.P.leftCols<3>();
+      v[0].R = f.pair.left.R;
+      v[1].K = f.pair.right.P.leftCols<3>();
+      v[1].R = f.pair.right.R * f.rig.R_rl();
+      v[1].t = f.pair.right.R * f.rig.t_rl();
+      v[0].uv = lms[i].uv_left;
+      v[1].uv = lms[i].uv_right;
+      return v;
+    }());
+    ASSERT_TRUE(direct.ok);
+    EXPECT_LT((lms[i].covariance - direct.C).norm() / direct.C.norm(), 1e-6);
+    EXPECT_EQ(lms[i].descriptor.size(), 2u);
+    EXPECT_FLOAT_EQ(lms[i].strength, 0.5f);
+  }
+}
+}  // namespace
+
+TEST(StereoLandmarks, RectifiedMatchesTriangulateToTheRawLeftFrame) {
+  const Fixture f(false);
+  std::vector<Eigen::Vector3d> pts;
+  for (double x = -0.1; x <= 0.2; x += 0.05)
+    for (double y = -0.1; y <= 0.1; y += 0.05) pts.emplace_back(x, y, 0.4 + 0.2 * x);
+  expectRoundTrip(f, pts);
+}
+
+TEST(StereoLandmarks, ConvergedRigRectifiedWithPrincipalPointOffset) {
+  const Fixture f(true);
+  EXPECT_FALSE(f.pair.zero_disparity);
+  std::vector<Eigen::Vector3d> pts;
+  for (double x = -0.02; x <= 0.021; x += 0.01)
+    for (double y = -0.02; y <= 0.021; y += 0.01) pts.emplace_back(0.075 + x, y, 0.28 + x);
+  expectRoundTrip(f, pts);
+}
+
+TEST(StereoLandmarks, NoisyMatchesAreConsistentWithTheirCovariance) {
+  const Fixture f(false);
+  std::mt19937 rng(9);
+  std::normal_distribution<double> n(0.0, 0.5);
+  double nees = 0.0;
+  int count = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const Eigen::Vector3d X(0.05 + 0.1 * std::sin(k), 0.05 * std::cos(3.0 * k), 0.45);
+    auto m = f.match(X);
+    m.left += Eigen::Vector2d(n(rng), n(rng));
+    m.right += Eigen::Vector2d(n(rng), n(rng));
+    const auto l = stereo::triangulateMatches(f.pair.left, f.pair.right, {m}, {});
+    ASSERT_EQ(l.size(), 1u);
+    const Eigen::Vector3d e = l[0].position - X;
+    nees += e.dot(l[0].covariance.inverse() * e);
+    ++count;
+  }
+  EXPECT_NEAR(nees / count, 3.0, 0.2);  // mean of chi2(3) over 3000 samples: 3 +- 0.045 (1 sigma)
+}
+
+TEST(StereoLandmarks, DropsImpossibleMatchesAndRejectsUncalibratedInfo) {
+  const Fixture f(false);
+  stereo::StereoMatch behind;  // negative disparity: behind the rig
+  behind.left = Eigen::Vector2d(300, 240);
+  behind.right = Eigen::Vector2d(320, 240);
+  stereo::StereoMatch far = f.match(Eigen::Vector3d(0.0, 0.0, 50.0));
+  int dropped = 0;
+  EXPECT_TRUE(stereo::triangulateMatches(f.pair.left, f.pair.right, {behind, far}, {}, &dropped).empty());
+  EXPECT_EQ(dropped, 2);
+  geometry::CameraInfo bad = f.pair.right;
+  bad.P.setZero();
+  EXPECT_THROW(stereo::triangulateMatches(f.pair.left, bad, {}, {}), std::invalid_argument);
+  bad = f.pair.right;
+  bad.P(0, 3) = 0.0;
+  EXPECT_THROW(stereo::triangulateMatches(f.pair.left, bad, {}, {}), std::invalid_argument);
+}

@@ -57,7 +57,7 @@ const char* kUsage =
     "  --converged-deg A     axes angle above which the rig counts as converged (default 15): rectified with\n"
     "                        flags 0 and the smallest alpha that keeps the boards inside both images\n"
     "  --left-name NAME      camera_name in left.yaml (default 'left'); --right-name likewise ('right')\n"
-    "  --quiet               no progress lines and no table\n"
+    "  --quiet               no progress lines and no table (warnings and errors still go to stderr)\n"
     "exit codes: 0 ok, 1 bad input, 2 bad command line, 3 cannot write the output\n";
 
 bool isImageFile(const std::string& name) {
@@ -222,10 +222,10 @@ int main(int argc, char** argv) {
     std::cerr << "calibrate_stereo: " << e.what() << "\n";
     return 1;
   }
-  if (!quiet && pattern.cols == pattern.rows)
+  if (pattern.cols == pattern.rows)
     std::cerr << "calibrate_stereo: warning: a square " << pattern_text
               << " board has no defined orientation; a board with different column and row counts is safer\n";
-  if (!quiet && pattern.square_m < 1e-3)
+  if (pattern.square_m < 1e-3)
     std::cerr << "calibrate_stereo: warning: --square " << square_text
               << " is read as less than 1 mm (a bare number is millimetres; write e.g. 0.025m for metres)\n";
   std::error_code ec;
@@ -246,20 +246,21 @@ int main(int argc, char** argv) {
     if (!lefts.count(key)) unpaired.push_back(file);
   std::sort(keys.begin(), keys.end(), naturalLess);
   std::sort(unpaired.begin(), unpaired.end(), naturalLess);
-  if (!unpaired.empty() && !quiet) {
+  if (!unpaired.empty()) {
     std::cerr << "calibrate_stereo: " << unpaired.size() << " image(s) without a partner, ignored:";
     for (const auto& f : unpaired) std::cerr << " " << f;
     std::cerr << "\n";
   }
   if (keys.empty()) {
-    std::cerr << "calibrate_stereo: no image pairs in '" << images << "': expected image files matching '"
-              << left_glob << "' and '" << right_glob << "' with the same key (e.g. left01.jpg + right01.jpg); "
-              << lefts.size() << " left and " << rights.size() << " right image(s) found; see --left-glob/--right-glob\n";
+    std::cerr << "calibrate_stereo: no image pairs in '" << images << "': expected image files matching '" << left_glob
+              << "' and '" << right_glob << "' with the same key (e.g. left01.jpg + right01.jpg); " << lefts.size()
+              << " left and " << rights.size() << " right image(s) found; see --left-glob/--right-glob\n";
     return 1;
   }
   std::vector<skin3d::stereo::ImagePair> pairs;
   for (const auto& k : keys)
-    pairs.push_back({displayKey(k), (fs::path(images) / lefts.at(k)).string(), (fs::path(images) / rights.at(k)).string()});
+    pairs.push_back(
+        {displayKey(k), (fs::path(images) / lefts.at(k)).string(), (fs::path(images) / rights.at(k)).string()});
 
   // ---- output folder first, so that a bad --out fails before the work (exit 3)
   if (!makeDirs(out_dir) || access(out_dir.c_str(), W_OK) != 0) {

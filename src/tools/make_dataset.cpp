@@ -409,6 +409,7 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
   truth << YAML::Key << "tilt_deg" << YAML::Value << w.tilt * 180 / M_PI;
   truth << YAML::Key << "resolution_scale" << YAML::Value << w.resolution_scale;
   truth << YAML::Key << "rectification_alpha" << YAML::Value << info.alpha;
+  truth << YAML::Key << "rectification_projection_fitted" << YAML::Value << info.projection_fitted;
   emitRig(truth, "rig_true", true_rig);
   emitRig(truth, "rig_in_camera_info", calib.rig);
   emitRealism(truth, c, calib);

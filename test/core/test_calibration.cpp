@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <opencv2/calib3d.hpp>
@@ -37,7 +38,9 @@ bool isFile(const std::string& p) {
   return stat(p.c_str(), &st) == 0 && S_ISREG(st.st_mode);
 }
 
-bool haveRealImages() { return isFile(kRealDir + "/left01.jpg") && isFile(kRealDir + "/right14.jpg"); }
+bool haveRealImages() {
+  return isFile(kRealDir + "/left01.jpg") && isFile(kRealDir + "/right14.jpg");
+}
 
 std::vector<stereo::ImagePair> realPairs() {
   std::vector<stereo::ImagePair> pairs;
@@ -89,11 +92,21 @@ std::string run(const std::string& cmd, int* status) {
   return out;
 }
 
-std::string tempDir() {
-  char tmpl[] = "/tmp/skin3d_calib_XXXXXX";
-  const char* d = mkdtemp(tmpl);
-  return d ? d : "/tmp";
-}
+/** A fresh folder under /tmp, removed with everything in it at the end of the scope. */
+struct TempDir {
+  std::string path;
+  TempDir() {
+    char tmpl[] = "/tmp/skin3d_calib_XXXXXX";
+    const char* d = mkdtemp(tmpl);
+    path = d ? d : "";
+  }
+  ~TempDir() {
+    std::error_code ec;
+    if (!path.empty()) std::filesystem::remove_all(path, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+};
 
 void copyFile(const std::string& from, const std::string& to) {
   std::ifstream in(from, std::ios::binary);
@@ -154,8 +167,8 @@ TEST(CalibrationReal, MatchesOpenCvStereoCalibrateAndAlignsRows) {
   std::vector<cv::Mat> rv, tv;
   cv::calibrateCamera(obj, corners.left, corners.image_size, K1, D1, rv, tv);
   cv::calibrateCamera(obj, corners.right, corners.image_size, K2, D2, rv, tv);
-  const double ref_rms = cv::stereoCalibrate(obj, corners.left, corners.right, K1, D1, K2, D2, corners.image_size, R,
-                                             T, E, F, cv::CALIB_FIX_INTRINSIC);
+  const double ref_rms = cv::stereoCalibrate(obj, corners.left, corners.right, K1, D1, K2, D2, corners.image_size, R, T,
+                                             E, F, cv::CALIB_FIX_INTRINSIC);
   const double ref_baseline = cv::norm(T);
   const double ref_angle = std::acos(std::min(1.0, R.at<double>(2, 2)));  // angle between the optical axes
   std::cout << "  RMS reprojection error: skin3d " << calib.rms_px << " px, OpenCV (FIX_INTRINSIC) " << ref_rms
@@ -182,7 +195,8 @@ TEST(CalibrationReal, MatchesOpenCvStereoCalibrateAndAlignsRows) {
   for (size_t i = 0; i < corners.names.size(); ++i) {
     std::vector<cv::Point2f> c[2];
     for (int s = 0; s < 2; ++s) {
-      const cv::Mat g = cv::imread(kRealDir + (s ? "/right" : "/left") + corners.names[i] + ".jpg", cv::IMREAD_GRAYSCALE);
+      const cv::Mat g =
+          cv::imread(kRealDir + (s ? "/right" : "/left") + corners.names[i] + ".jpg", cv::IMREAD_GRAYSCALE);
       ASSERT_TRUE(cv::findChessboardCorners(g, cv::Size(9, 6), c[s],
                                             cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE));
       cv::cornerSubPix(g, c[s], cv::Size(5, 5), cv::Size(-1, -1),
@@ -198,6 +212,8 @@ TEST(CalibrationReal, MatchesOpenCvStereoCalibrateAndAlignsRows) {
     il.push_back(c[0]);
     ir.push_back(c[1]);
   }
+  std::cout << "  corners vs OpenCV's own (5x5 window): median " << median(corner_diff) << " px, max "
+            << corner_diff_max << " px\n";
   EXPECT_LT(median(corner_diff), 0.1);
   EXPECT_LT(corner_diff_max, 1.0);
   const auto dv = rectifiedRowErrors(calib.left, calib.right, il, ir);
@@ -217,12 +233,15 @@ namespace {
 
 struct SyntheticRig {
   geometry::StereoRig rig;
-  std::vector<std::vector<Eigen::Vector3d>> boards;  // board corners in the left frame, per view
+  std::vector<std::vector<Eigen::Vector3d>> boards;                // board corners in the left frame, per view
+  std::vector<std::pair<Eigen::Matrix3d, Eigen::Vector3d>> poses;  // X_left = R p_board + t, per view
 };
 
 // The thesis' Part I rig (f 2625 px at 4224x3136, 210 mm, 54.4 deg) at a quarter of the resolution, with a mild
-// lens distortion, and boards of 9x6 inner corners (15 mm squares) around the working distance of 245 mm.
-SyntheticRig convergedRig(const stereo::ChessboardPattern& pattern, int views, std::mt19937* rng) {
+// lens distortion, and boards of 9x6 inner corners (15 mm squares) around the working distance of 245 mm, every
+// inner corner at least margin_px from the border of both images.
+SyntheticRig convergedRig(const stereo::ChessboardPattern& pattern, int views, std::mt19937* rng,
+                          double margin_px = 10.0) {
   Eigen::Matrix3d K;
   K << 2625.0 / 4, 0, 527.5, 0, 2625.0 / 4, 391.5, 0, 0, 1;
   const geometry::PinholeCamera cl(K, 1056, 784, {-0.06, 0.04, 0.0004, -0.0003, 0.0});
@@ -234,7 +253,7 @@ SyntheticRig convergedRig(const stereo::ChessboardPattern& pattern, int views, s
   const geometry::PinholeCamera cr(K2, 1056, 784, {-0.05, 0.03, -0.0002, 0.0005, 0.0});
   const double a = 54.4 * kDeg;
   const Eigen::Vector3d c_r = geometry::so3Exp(Eigen::Vector3d(0, -0.5 * a, 0)) * Eigen::Vector3d(0.21, 0, 0);
-  SyntheticRig s{geometry::StereoRig::fromRightPose(cl, cr, geometry::so3Exp(Eigen::Vector3d(0, -a, 0)), c_r), {}};
+  SyntheticRig s{geometry::StereoRig::fromRightPose(cl, cr, geometry::so3Exp(Eigen::Vector3d(0, -a, 0)), c_r), {}, {}};
   // Rig frame: origin at the midpoint of the optical centres, z along the bisector.
   const Eigen::Matrix3d R_rig_left = geometry::so3Exp(Eigen::Vector3d(0, 0.5 * a, 0));
   const Eigen::Vector3d c_left(-0.105, 0, 0);
@@ -243,24 +262,93 @@ SyntheticRig convergedRig(const stereo::ChessboardPattern& pattern, int views, s
   const Eigen::Vector3d centre_board(0.5 * (pattern.cols - 1) * pattern.square_m,
                                      0.5 * (pattern.rows - 1) * pattern.square_m, 0.0);
   int tries = 0;
-  while (static_cast<int>(s.boards.size()) < views && ++tries < 10000) {
+  while (static_cast<int>(s.boards.size()) < views && ++tries < 100000) {
     const Eigen::Matrix3d R_rig_board =
         geometry::so3Exp(Eigen::Vector3d(30 * kDeg * u(*rng), 30 * kDeg * u(*rng), 25 * kDeg * u(*rng)));
     const Eigen::Vector3d centre(0.03 * u(*rng), 0.025 * u(*rng), 0.245 + 0.03 * u(*rng));
+    const Eigen::Matrix3d R = R_rig_left.transpose() * R_rig_board;
+    const Eigen::Vector3d t = R_rig_left.transpose() * (centre - R_rig_board * centre_board - c_left);
     std::vector<Eigen::Vector3d> pts;
     bool ok = true;
     for (const auto& p : obj) {
-      const Eigen::Vector3d X_rig = centre + R_rig_board * (Eigen::Vector3d(p.x, p.y, p.z) - centre_board);
-      const Eigen::Vector3d X = R_rig_left.transpose() * (X_rig - c_left);
+      const Eigen::Vector3d X = R * Eigen::Vector3d(p.x, p.y, p.z) + t;
       Eigen::Vector2d ul, ur;
       ok = ok && s.rig.project(X, &ul, &ur);
       for (const auto& uv : {ul, ur})
-        ok = ok && uv.x() > 10 && uv.y() > 10 && uv.x() < 1056 - 11 && uv.y() < 784 - 11;
+        ok = ok && uv.x() > margin_px && uv.y() > margin_px && uv.x() < 1055 - margin_px && uv.y() < 783 - margin_px;
       pts.push_back(X);
     }
-    if (ok) s.boards.push_back(pts);
+    if (!ok) continue;
+    s.boards.push_back(pts);
+    s.poses.emplace_back(R, t);
   }
   return s;
+}
+
+/** Where every raw pixel of a distorted camera lies in its ideal pinhole image (computed once per camera). */
+struct DistortionMap {
+  cv::Mat x, y;
+};
+DistortionMap distortionMap(const geometry::PinholeCamera& cam, int pad) {
+  const int W = cam.width(), H = cam.height();
+  std::vector<cv::Point2f> raw, ideal;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) raw.emplace_back(static_cast<float>(x), static_cast<float>(y));
+  cv::Mat K(3, 3, CV_64F);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) K.at<double>(i, j) = cam.K()(i, j);
+  cv::undistortPoints(raw, ideal, K, cv::Mat(cam.D()), cv::noArray(), K,
+                      cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 1e-6));
+  DistortionMap m{cv::Mat(H, W, CV_32F), cv::Mat(H, W, CV_32F)};
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      m.x.at<float>(y, x) = ideal[y * W + x].x + pad;
+      m.y.at<float>(y, x) = ideal[y * W + x].y + pad;
+    }
+  return m;
+}
+
+/**
+ * Renders a view of the board (squares of pattern.square_m, one white square of margin around the 10x7 squares,
+ * on a grey background) through a distorted camera: 2x2 samples per pixel of the ideal pinhole image (padded by
+ * `pad` px), then the lens distortion by remapping every raw pixel to its ideal position; mild blur and noise.
+ */
+cv::Mat renderBoard(const geometry::PinholeCamera& cam, const DistortionMap& map, int pad, const Eigen::Matrix3d& R,
+                    const Eigen::Vector3d& t, const stereo::ChessboardPattern& pattern, std::mt19937* rng) {
+  const int W = cam.width(), H = cam.height(), S = 2;
+  const Eigen::Matrix3d A = R.transpose() * cam.K().inverse();  // board-frame direction of pixel (u, v, 1)
+  const Eigen::Vector3d o = R.transpose() * t;
+  const double sq = pattern.square_m;
+  cv::Mat ideal(H + 2 * pad, W + 2 * pad, CV_32F);
+  for (int y = 0; y < ideal.rows; ++y)
+    for (int x = 0; x < ideal.cols; ++x) {
+      double sum = 0.0;
+      for (int i = 0; i < S; ++i)
+        for (int j = 0; j < S; ++j) {
+          const double u = x - pad + (j + 0.5) / S - 0.5, v = y - pad + (i + 0.5) / S - 0.5;
+          const Eigen::Vector3d d = A.col(0) * u + A.col(1) * v + A.col(2);
+          const double lambda = o.z() / d.z();
+          double value = 0.35;  // background
+          if (lambda > 0.0) {
+            const double cx = std::floor((lambda * d.x() - o.x()) / sq), cy = std::floor((lambda * d.y() - o.y()) / sq);
+            if (cx >= -1 && cx <= pattern.cols - 1 && cy >= -1 && cy <= pattern.rows - 1)
+              value = (static_cast<long>(cx + cy) % 2 == 0) ? 0.05 : 0.95;
+            else if (cx >= -2 && cx <= pattern.cols && cy >= -2 && cy <= pattern.rows)
+              value = 0.95;  // white margin
+          }
+          sum += value;
+        }
+      ideal.at<float>(y, x) = static_cast<float>(255.0 * sum / (S * S));
+    }
+  cv::Mat img, noise(H, W, CV_32F);
+  cv::remap(ideal, img, map.x, map.y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(90));
+  cv::GaussianBlur(img, img, cv::Size(0, 0), 0.7);
+  cv::RNG cv_rng((*rng)());
+  cv_rng.fill(noise, cv::RNG::NORMAL, 0.0, 2.0);
+  img += noise;
+  cv::Mat out;
+  img.convertTo(out, CV_8U);
+  return out;
 }
 
 }  // namespace
@@ -293,9 +381,9 @@ TEST(CalibrationSynthetic, ConvergedRigRecoversBaselineAndAngleAndKeepsTheBoardI
   }
   const auto calib = stereo::calibrateStereo(corners, pattern);
   std::cout << "  synthetic 54.4 deg rig: baseline " << calib.baseline_m * 1e3 << " mm (210), angle "
-            << calib.axes_angle_rad / kDeg << " deg (54.4), RMS " << calib.rms_px << " px, fx "
-            << calib.rig.left().fx() << " (656.25), alpha " << calib.alpha << ", inside "
-            << calib.board_points_inside << "/" << calib.board_points.size() << "\n";
+            << calib.axes_angle_rad / kDeg << " deg (54.4), RMS " << calib.rms_px << " px, fx " << calib.rig.left().fx()
+            << " (656.25), rectified f " << calib.left.P(0, 0) << (calib.projection_fitted ? " (P fitted)" : "")
+            << ", inside " << calib.board_points_inside << "/" << calib.board_points.size() << "\n";
   EXPECT_NEAR(calib.baseline_m, 0.210, 0.01 * 0.210);
   EXPECT_NEAR(calib.axes_angle_rad / kDeg, 54.4, 0.3);
   EXPECT_NEAR(calib.rig.left().fx(), 656.25, 0.01 * 656.25);
@@ -306,6 +394,8 @@ TEST(CalibrationSynthetic, ConvergedRigRecoversBaselineAndAngleAndKeepsTheBoardI
   EXPECT_TRUE(calib.converged);
   EXPECT_FALSE(calib.zero_disparity);  // DESIGN.md: CALIB_ZERO_DISPARITY would move the board out of the images
   EXPECT_EQ(calib.board_points_inside, static_cast<int>(calib.board_points.size()));
+  // A usable rectified resolution (OpenCV's alpha > 0 with flags 0 shrinks the focal length to a few px here).
+  EXPECT_GT(calib.left.P(0, 0), 0.5 * 656.25) << calib.rectification_note;
 
   // The true (noise-free) corners through the estimated rectification: inside both images, rows aligned.
   const auto dv = rectifiedRowErrors(calib.left, calib.right, exact_l, exact_r);
@@ -435,7 +525,8 @@ TEST(CalibrationYaml, RoundTripIsExactAndTheLayoutIsRos) {
   EXPECT_EQ(shape.scalars.size() + shape.matrices.size(), 8u);
 
   // Files: write, read back.
-  const std::string dir = tempDir(), path = dir + "/right.yaml";
+  const TempDir tmp;
+  const std::string dir = tmp.path, path = dir + "/right.yaml";
   std::ofstream(path) << text;
   EXPECT_EQ(stereo::readCameraInfoYaml(path).P, info.P);
 
@@ -461,15 +552,14 @@ TEST(CalibrationYaml, RoundTripIsExactAndTheLayoutIsRos) {
   t.replace(t.find("-0.123456789"), 12, "oops");
   expectField(t, "distortion_coefficients");
   EXPECT_THROW(stereo::readCameraInfoYaml(dir + "/missing.yaml"), stereo::CalibrationError);
-  std::remove(path.c_str());
-  rmdir(dir.c_str());
 }
 
 // ------------------------------------------------------------------------------------------------ command line
 
 TEST(CalibrateStereoCli, RealImagesEndToEnd) {
   if (!haveRealImages()) GTEST_SKIP() << "no chessboard images at " << kRealDir << " (the shared data folder)";
-  const std::string bin = SKIN3D_CALIBRATE_STEREO_BIN, out = tempDir() + "/out";
+  const TempDir tmp;
+  const std::string bin = SKIN3D_CALIBRATE_STEREO_BIN, out = tmp.path + "/out";
   int status = -1;
   const std::string log = run(bin + " --images " + kRealDir + " --pattern 9x6 --square 1 --out " + out, &status);
   ASSERT_EQ(status, 0) << log;
@@ -503,7 +593,8 @@ TEST(CalibrateStereoCli, RealImagesEndToEnd) {
 
 TEST(CalibrateStereoCli, SkipsAndListsPairsWithoutBoardAndUnpairedFiles) {
   if (!haveRealImages()) GTEST_SKIP() << "no chessboard images at " << kRealDir << " (the shared data folder)";
-  const std::string dir = tempDir(), bin = SKIN3D_CALIBRATE_STEREO_BIN;
+  const TempDir tmp;
+  const std::string dir = tmp.path, bin = SKIN3D_CALIBRATE_STEREO_BIN;
   // Four real pairs under other names, a pair of blank frames, a left image without a partner and a text file.
   const char* keys[] = {"01", "04", "07", "11"};
   mkdir((dir + "/cam0").c_str(), 0755);
@@ -540,7 +631,8 @@ TEST(CalibrateStereoCli, SkipsAndListsPairsWithoutBoardAndUnpairedFiles) {
 }
 
 TEST(CalibrateStereoCli, BadInputAndCommandLine) {
-  const std::string dir = tempDir(), bin = SKIN3D_CALIBRATE_STEREO_BIN;
+  const TempDir tmp;
+  const std::string dir = tmp.path, bin = SKIN3D_CALIBRATE_STEREO_BIN;
   mkdir((dir + "/empty").c_str(), 0755);
   int status = -1;
   std::string log = run(bin + " --images " + dir + "/empty --pattern 9x6 --square 1 --out " + dir + "/o", &status);
@@ -578,15 +670,15 @@ TEST(CalibrateStereoCli, BadInputAndCommandLine) {
   if (haveRealImages()) {
     mkdir((dir + "/two").c_str(), 0755);
     for (const char* k : {"01", "02"})
-      for (const char* s : {"left", "right"})
-        copyFile(kRealDir + "/" + s + k + ".jpg", dir + "/two/" + s + k + ".jpg");
+      for (const char* s : {"left", "right"}) copyFile(kRealDir + "/" + s + k + ".jpg", dir + "/two/" + s + k + ".jpg");
     log = run(bin + " --images " + dir + "/two --pattern 9x6 --square 1 --out " + dir + "/o", &status);
     EXPECT_EQ(status, 1) << log;
     EXPECT_NE(log.find("only 2 of 2 pairs; at least 3"), std::string::npos) << log;
 
     // An --out that cannot be created (below a regular file, even for root): exit 3.
     std::ofstream(dir + "/a_file") << "x";
-    log = run(bin + " --images " + kRealDir + " --pattern 9x6 --square 1 --quiet --out " + dir + "/a_file/out", &status);
+    log =
+        run(bin + " --images " + kRealDir + " --pattern 9x6 --square 1 --quiet --out " + dir + "/a_file/out", &status);
     EXPECT_EQ(status, 3) << log;
     EXPECT_NE(log.find("a_file/out"), std::string::npos) << log;
   }
@@ -602,4 +694,67 @@ TEST(CalibrateStereoCli, BadInputAndCommandLine) {
   log = run(bin + " --help", &status);
   EXPECT_EQ(status, 0);
   EXPECT_NE(log.find("--left-glob"), std::string::npos);
+}
+
+TEST(CalibrateStereoCli, RenderedConvergedRigEndToEnd) {
+  // Images of the 54.4 deg rig rendered from the ground truth, through the command line.
+  std::mt19937 rng(7);
+  stereo::ChessboardPattern pattern;
+  pattern.square_m = 0.015;
+  const auto truth = convergedRig(pattern, 12, &rng, 60.0);
+  ASSERT_EQ(truth.poses.size(), 12u);
+  const TempDir tmp;
+  const std::string dir = tmp.path, bin = SKIN3D_CALIBRATE_STEREO_BIN;
+  const int pad = 60;
+  const DistortionMap map_l = distortionMap(truth.rig.left(), pad), map_r = distortionMap(truth.rig.right(), pad);
+  std::vector<std::vector<cv::Point2f>> exact_l, exact_r;
+  for (size_t v = 0; v < truth.poses.size(); ++v) {
+    const auto& [R, t] = truth.poses[v];
+    const Eigen::Matrix3d R_r = truth.rig.R_rl() * R;
+    const Eigen::Vector3d t_r = truth.rig.R_rl() * t + truth.rig.t_rl();
+    char name[32];
+    std::snprintf(name, sizeof(name), "%02zu.png", v + 1);
+    cv::imwrite(dir + "/left" + name, renderBoard(truth.rig.left(), map_l, pad, R, t, pattern, &rng));
+    cv::imwrite(dir + "/right" + name, renderBoard(truth.rig.right(), map_r, pad, R_r, t_r, pattern, &rng));
+    std::vector<cv::Point2f> el, er;
+    for (const auto& X : truth.boards[v]) {
+      Eigen::Vector2d ul, ur;
+      truth.rig.project(X, &ul, &ur);
+      el.emplace_back(ul.x(), ul.y());
+      er.emplace_back(ur.x(), ur.y());
+    }
+    exact_l.push_back(el);
+    exact_r.push_back(er);
+  }
+  int status = -1;
+  const std::string log = run(bin + " --images " + dir + " --pattern 9x6 --square 15mm --out " + dir + "/out", &status);
+  ASSERT_EQ(status, 0) << log;
+  std::cout << log.substr(log.find("Stereo calibration"), 700) << "...\n";
+  const std::string report = readFile(dir + "/out/report.yaml");
+  const auto number = [&](const std::string& key) {
+    const auto pos = report.find(key + ": ");
+    return pos == std::string::npos ? std::nan("") : std::stod(report.substr(pos + key.size() + 2));
+  };
+  EXPECT_EQ(number("pairs_used"), 12.0) << log;
+  EXPECT_NEAR(number("baseline_mm"), 210.0, 2.1);
+  EXPECT_NEAR(number("optical_axes_angle_deg"), 54.4, 0.3);
+  EXPECT_LT(number("rms_reprojection_error_px"), 0.3);
+  EXPECT_NE(report.find("converged_rig: true"), std::string::npos) << report;
+  EXPECT_NE(report.find("flags: 0"), std::string::npos) << report;
+  EXPECT_EQ(number("  board_corners_inside_both_images"), number("  board_corners"));
+  // The YAML pair a ROS node would load: true corners rectified through it are inside both images, rows aligned.
+  const auto l = stereo::readCameraInfoYaml(dir + "/out/left.yaml");
+  const auto r = stereo::readCameraInfoYaml(dir + "/out/right.yaml");
+  const auto dv = rectifiedRowErrors(l, r, exact_l, exact_r);
+  EXPECT_LT(median(dv), 0.3);
+  EXPECT_LT(*std::max_element(dv.begin(), dv.end()), 1.0);
+  int outside = 0;
+  for (size_t v = 0; v < exact_l.size(); ++v)
+    for (const auto& [info, pts] : {std::make_pair(&l, &exact_l[v]), std::make_pair(&r, &exact_r[v])})
+      for (const auto& p : stereo::rectifyPixels(*info, *pts))
+        outside += (p.x < 0 || p.y < 0 || p.x > 1055 || p.y > 783) ? 1 : 0;
+  EXPECT_EQ(outside, 0);
+  const cv::Mat preview = cv::imread(dir + "/out/rectified_preview.png");
+  ASSERT_FALSE(preview.empty());
+  EXPECT_EQ(preview.cols, 1600);
 }

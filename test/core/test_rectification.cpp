@@ -23,12 +23,12 @@ geometry::StereoRig partOneRig() {
 }
 
 // A 100 x 80 mm plate 245 mm in front of the rig midpoint, facing it (left frame coordinates).
-std::vector<Eigen::Vector3d> plate(const geometry::StereoRig& rig) {
+std::vector<Eigen::Vector3d> plate(const geometry::StereoRig& rig, double half_width = 0.05) {
   const double half = 0.5 * rig.opticalAxesAngle();
   const Eigen::Matrix3d R_rig_left = geometry::so3Exp(Eigen::Vector3d(0, half, 0));
   const Eigen::Vector3d c_left(-0.105, 0, 0);
   std::vector<Eigen::Vector3d> pts;
-  for (double x = -0.05; x <= 0.0501; x += 0.01)
+  for (double x = -half_width; x <= half_width + 1e-4; x += half_width / 5)
     for (double y = -0.04; y <= 0.0401; y += 0.01)
       pts.push_back(R_rig_left.transpose() * (Eigen::Vector3d(x, y, 0.245) - c_left));
   return pts;
@@ -61,6 +61,28 @@ TEST(Rectification, ConvergedRigKeepsThePlateInsideBothImagesAndRowsAligned) {
   // Round trip: the rig rebuilt from the rectified CameraInfo pair is the original one.
   const auto back = geometry::StereoRig::fromCameraInfo(pair.left, pair.right);
   EXPECT_LT((back.R_rl() - rig.R_rl()).norm(), 1e-9);
+  EXPECT_LT((back.t_rl() - rig.t_rl()).norm(), 1e-9);
+}
+
+TEST(Rectification, WidePlateGetsFittedProjections) {
+  // 200 mm wide: both raw cameras see it, alpha 0 loses it, OpenCV's alpha > 0 degenerates for 54.4 deg.
+  const auto rig = partOneRig();
+  const auto pts = plate(rig, 0.10);
+  const auto pair = stereo::rectifyStereo(rig, pts);
+  EXPECT_TRUE(pair.projection_fitted);
+  EXPECT_GT(pair.left.P(0, 0), 0.3 * rig.left().fx());  // not a degenerate, tiny focal length
+  EXPECT_LE(pair.left.P(0, 0), rig.left().fx());
+  for (const auto& X : pts) {
+    const Eigen::Vector2d l = stereo::projectRectified(pair, X, false), r = stereo::projectRectified(pair, X, true);
+    EXPECT_NEAR(l.y(), r.y(), 1e-6);
+    for (const auto& uv : {l, r}) {
+      EXPECT_GE(uv.x(), 0.0);
+      EXPECT_LE(uv.x(), 1055.0);
+      EXPECT_GE(uv.y(), 0.0);
+      EXPECT_LE(uv.y(), 783.0);
+    }
+  }
+  const auto back = geometry::StereoRig::fromCameraInfo(pair.left, pair.right);
   EXPECT_LT((back.t_rl() - rig.t_rl()).norm(), 1e-9);
 }
 

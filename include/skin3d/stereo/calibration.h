@@ -9,7 +9,8 @@
  * camera_calibration does) -> rectification with stereo::rectifyStereo():
  *  - a near-parallel rig (axes angle <= converged_threshold_rad) gets ROS's CALIB_ZERO_DISPARITY, alpha 0;
  *  - a strongly converged rig (the thesis' 54.4 deg one) gets flags 0 and the smallest alpha that keeps every
- *    board corner of every used view inside both rectified images (DESIGN.md, "Known facts").
+ *    board corner of every used view inside both rectified images (DESIGN.md, "Known facts"); when alpha 0 does
+ *    not, the rectified projections are fitted to those corners instead (see projection_fitted).
  *
  * Units: the core is SI. The board's square size is in metres, so the baseline, the right camera's
  * translation and P(0,3) = -fx' B of the right CameraInfo are in metres (as ROS expects); pixels are pixels.
@@ -39,8 +40,7 @@ namespace stereo {
 /** @brief Bad calibration input or file: names the field (option, file or YAML key) and the problem. */
 class CalibrationError : public std::runtime_error {
  public:
-  CalibrationError(const std::string& field, const std::string& message)
-      : std::runtime_error(message), field_(field) {}
+  CalibrationError(const std::string& field, const std::string& message) : std::runtime_error(message), field_(field) {}
   const std::string& field() const { return field_; }
 
  private:
@@ -137,16 +137,21 @@ struct StereoCalibration {
   geometry::StereoRig rig;  //!< raw (distorted) cameras and extrinsics, metres
   double rms_px = 0.0;      //!< stereoCalibrate's RMS reprojection error over both cameras and all pairs
   double left_mono_rms_px = 0.0, right_mono_rms_px = 0.0;  //!< calibrateCamera per camera
-  double baseline_m = 0.0;                                  //!< distance between the optical centres
-  double axes_angle_rad = 0.0;                              //!< angle between the optical axes
-  std::vector<PairError> pairs;                             //!< per used pair
+  double baseline_m = 0.0;                                 //!< distance between the optical centres
+  double axes_angle_rad = 0.0;                             //!< angle between the optical axes
+  std::vector<PairError> pairs;                            //!< per used pair
   // rectification
   bool converged = false;      //!< axes angle > options.converged_threshold_rad
   bool zero_disparity = true;  //!< CALIB_ZERO_DISPARITY (true) or flags 0
-  double alpha = 0.0;          //!< stereoRectify's free scaling parameter used
+  double alpha = 0.0;          //!< stereoRectify's free scaling parameter used (meaningless if projection_fitted)
+  /** Converged rig whose boards do not fit at alpha 0: stereoRectify's rotations are kept, but P (one focal length
+   *  and row centre, a principal point per camera) is fitted so that every board corner is inside both images.
+   *  (OpenCV's alpha > 0 with flags 0 shrinks or even negates the focal length when the principal point it picks
+   *  lies outside the image, as it does for the 54.4 deg rig.) */
+  bool projection_fitted = false;
   /** Used board corners in the left frame (m), from the board poses; the points of interest of a converged rig. */
   std::vector<Eigen::Vector3d> board_points;
-  int board_points_inside = 0;  //!< how many of them lie inside both rectified images
+  int board_points_inside = 0;     //!< how many of them lie inside both rectified images
   std::string rectification_note;  //!< how the rectification was chosen (human readable)
   // rows after rectification (detected corners through K, D, R, P)
   double rect_dv_median_px = 0.0, rect_dv_max_px = 0.0;

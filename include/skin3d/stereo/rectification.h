@@ -6,8 +6,10 @@
  * With OpenCV's default CALIB_ZERO_DISPARITY (what ROS camera_calibration uses), a strongly converged
  * rig's scene leaves both rectified images. With points of interest given, rectification uses flags 0
  * (each camera keeps its own principal point; the right P then has a different cx, which
- * image_geometry's StereoCameraModel handles through the disparity offset) and the smallest alpha in
- * {0, 0.25, 0.5, 0.75, 1} for which every point of interest lies inside both rectified images.
+ * image_geometry's StereoCameraModel handles through the disparity offset) and alpha 0; if the points of
+ * interest do not all fit, OpenCV's alpha > 0 is no help (for a 54.4 deg rig it puts the principal point
+ * outside the image and shrinks or flips the focal length), so the rotations are kept and the projections
+ * fitted to the points (fitRectifiedProjection).
  *
  * SPDX-License-Identifier: BSD-3-Clause
  */
@@ -27,7 +29,15 @@ struct RectifiedPair {
   geometry::CameraInfo left, right;
   double alpha = 0.0;       //!< the free-scaling parameter used
   bool zero_disparity = true;  //!< CALIB_ZERO_DISPARITY used (equal cx in both P)
+  bool projection_fitted = false;  //!< P fitted to the points of interest (see fitRectifiedProjection)
 };
+
+/**
+ * @brief Keeps the rectifying rotations of `p` and fits new projections: one focal length (at most f_max),
+ * one row centre and a principal point per camera, so that every left-frame point lies inside both images
+ * with `margin` px to spare. False if a point is not in front of both rectified cameras.
+ */
+bool fitRectifiedProjection(RectifiedPair* p, const std::vector<Eigen::Vector3d>& points, double f_max, double margin);
 
 /**
  * @brief Rectifies `rig` (raw cameras with their distortion) for images of the rig's size.

@@ -25,7 +25,9 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
 
-[[noreturn]] void fail(const std::string& field, const std::string& why) { throw CalibrationError(field, why); }
+[[noreturn]] void fail(const std::string& field, const std::string& why) {
+  throw CalibrationError(field, why);
+}
 
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r\n");
@@ -181,10 +183,12 @@ bool detectChessboard(const cv::Mat& image, const cv::Size& pattern, std::vector
   if (!cv::findChessboardCorners(small, pattern, c, flags)) return false;
   if (static_cast<int>(c.size()) != pattern.area()) return false;
   if (scale != 1.0)
-    for (auto& p : c) p = cv::Point2f(static_cast<float>((p.x + 0.5) / scale - 0.5), static_cast<float>((p.y + 0.5) / scale - 0.5));
-  // Refinement window: half-size 0.3 of the smallest corner spacing, 3..25 px. On OpenCV's sample pairs the
+    for (auto& p : c)
+      p = cv::Point2f(static_cast<float>((p.x + 0.5) / scale - 0.5), static_cast<float>((p.y + 0.5) / scale - 0.5));
+  // Refinement window: half-size 0.3 of the smallest corner spacing, 3..60 px. On OpenCV's sample pairs the
   // refined corners are stable for 0.2..0.35 (< 0.5 px apart), while 0.4 already pulls outer corners by up to
-  // 4 px towards the board's edge and OpenCV's sample's fixed 11 px doubles the RMS error (0.45 vs 0.20 px).
+  // 4 px towards the board's edge and the sample's fixed 11 px doubles the RMS error (0.45 vs 0.20 px). The
+  // same pairs upscaled to 4224 px (blurred edges) need the large windows: a 25 px cap gives 1.72 px, 60 px 1.43.
   double spacing = 1e9;
   for (int r = 0; r < pattern.height; ++r)
     for (int k = 0; k < pattern.width; ++k) {
@@ -192,7 +196,7 @@ bool detectChessboard(const cv::Mat& image, const cv::Size& pattern, std::vector
       if (k + 1 < pattern.width) spacing = std::min(spacing, cv::norm(c[r * pattern.width + k + 1] - p));
       if (r + 1 < pattern.height) spacing = std::min(spacing, cv::norm(c[(r + 1) * pattern.width + k] - p));
     }
-  const int half = std::max(3, std::min(25, static_cast<int>(std::lround(0.3 * spacing))));
+  const int half = std::max(3, std::min(60, static_cast<int>(std::lround(0.3 * spacing))));
   cv::cornerSubPix(gray, c, cv::Size(half, half), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 50, 1e-3));
   *corners = std::move(c);
@@ -321,9 +325,9 @@ StereoCalibration calibrateStereo(const StereoCorners& corners, const Chessboard
   const int stereo_flags =
       dist_flags | (options.fix_intrinsic ? cv::CALIB_FIX_INTRINSIC : cv::CALIB_USE_INTRINSIC_GUESS);
   cv::Mat R, T, E, F, per_view;
-  out.rms_px = cv::stereoCalibrate(object, corners.left, corners.right, K1, D1, K2, D2, size, R, T, E, F, per_view,
-                                   stereo_flags,
-                                   cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-7));
+  out.rms_px =
+      cv::stereoCalibrate(object, corners.left, corners.right, K1, D1, K2, D2, size, R, T, E, F, per_view, stereo_flags,
+                          cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-7));
   if (!std::isfinite(out.rms_px) || !cv::checkRange(K1) || !cv::checkRange(K2) || !cv::checkRange(R) ||
       !cv::checkRange(T))
     fail("corners", "calibration: the stereo calibration diverged (non-finite result); check the corner lists");
@@ -374,20 +378,45 @@ StereoCalibration calibrateStereo(const StereoCorners& corners, const Chessboard
                              " deg <= " + fixed(options.converged_threshold_rad * kRadToDeg, 1) +
                              " deg): CALIB_ZERO_DISPARITY, alpha 0 (as ROS camera_calibration)";
   } else {
+    const std::string head =
+        "strongly converged rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) + " deg): ";
+    bool at_alpha0 = false;
     try {
       rect = rectifyStereo(out.rig, out.board_points);
-      out.rectification_note = "strongly converged rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) +
-                               " deg): flags 0, smallest alpha keeping all " +
-                               std::to_string(out.board_points.size()) +
-                               " board corners inside both rectified images";
+      at_alpha0 = rect.alpha == 0.0;
     } catch (const std::runtime_error&) {
+      // No alpha keeps every corner inside: the rotations are all that is needed from here on.
       Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
       for (const auto& X : out.board_points) centroid += X;
       centroid /= static_cast<double>(out.board_points.size());
-      rect = rectifyStereo(out.rig, {centroid});
-      out.rectification_note = "strongly converged rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) +
-                               " deg): flags 0; no alpha keeps every board corner inside both rectified images, "
-                               "so the alpha keeps the boards' centroid inside";
+      try {
+        rect = rectifyStereo(out.rig, {centroid});
+      } catch (const std::runtime_error&) {
+        rect = rectifyStereo(out.rig);
+      }
+    }
+    if (at_alpha0) {
+      out.rectification_note = head + "flags 0, alpha 0 keeps all " + std::to_string(out.board_points.size()) +
+                               " board corners inside both rectified images";
+    } else {
+      RectifiedPair fitted = rect;
+      // Focal length at most the raw cameras' (mean of fx, fy of both): no zoom beyond the raw resolution.
+      const double f_raw =
+          0.25 * (out.rig.left().fx() + out.rig.left().fy() + out.rig.right().fx() + out.rig.right().fy());
+      if (fitRectifiedProjection(&fitted, out.board_points, f_raw, 2.0)) {
+        rect = fitted;
+        out.projection_fitted = true;
+        out.rectification_note =
+            head +
+            "flags 0; alpha 0 loses board corners and OpenCV's alpha > 0 degenerates for this rig, so the "
+            "rectified P (focal " +
+            fixed(rect.left.P(0, 0), 1) + " px, at most the raw one; a cx per camera) is fitted to keep all " +
+            std::to_string(out.board_points.size()) + " board corners inside both images";
+      } else {
+        out.rectification_note = head + (rect.zero_disparity ? "CALIB_ZERO_DISPARITY" : "flags 0") + ", alpha " +
+                                 fixed(rect.alpha, 2) +
+                                 "; some board corners are not in front of both rectified cameras";
+      }
     }
   }
   out.zero_disparity = rect.zero_disparity;
@@ -427,8 +456,8 @@ cv::Mat drawRectifiedPreview(const StereoCalibration& calib, const cv::Mat& left
     return out;
   };
   if (left_raw.empty() || right_raw.empty() || left_raw.size() != size || right_raw.size() != size)
-    fail("preview", "preview: both raw images must be " + std::to_string(size.width) + "x" +
-                        std::to_string(size.height));
+    fail("preview",
+         "preview: both raw images must be " + std::to_string(size.width) + "x" + std::to_string(size.height));
   const cv::Mat l = rectified(calib.left, left_raw), r = rectified(calib.right, right_raw);
   cv::Mat both;
   cv::hconcat(l, r, both);
@@ -469,9 +498,10 @@ cv::Mat drawRectifiedPreview(const StereoCalibration& calib, const cv::Mat& left
     }
   }
   const double font = std::max(0.4, H / 900.0);
-  const std::string mode =
-      calib.zero_disparity ? "CALIB_ZERO_DISPARITY" : "flags 0";
-  const std::string caption_l = "left rectified  (" + mode + ", alpha " + fixed(calib.alpha, 2) + ")";
+  const std::string mode = calib.zero_disparity ? "CALIB_ZERO_DISPARITY" : "flags 0";
+  const std::string caption_l = "left rectified  (" + mode + ", " +
+                                (calib.projection_fitted ? std::string("P fitted") : "alpha " + fixed(calib.alpha, 2)) +
+                                ")";
   const std::string caption_r = "right rectified  (median |dv| " + fixed(calib.rect_dv_median_px, 2) + " px)";
   for (const auto& [text, x] : {std::make_pair(caption_l, 8.0), std::make_pair(caption_r, off + 8.0)}) {
     const cv::Point org(static_cast<int>(x), static_cast<int>(22 * font / 0.6));
@@ -608,7 +638,9 @@ std::string list(const std::vector<double>& v, int decimals = -1) {
   for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + (decimals < 0 ? exact(v[i]) : fixed(v[i], decimals));
   return s + "]";
 }
-std::string vec(const Eigen::Vector3d& v, int decimals = -1) { return list({v.x(), v.y(), v.z()}, decimals); }
+std::string vec(const Eigen::Vector3d& v, int decimals = -1) {
+  return list({v.x(), v.y(), v.z()}, decimals);
+}
 }  // namespace
 
 std::string calibrationReportYaml(const StereoCalibration& c, const std::vector<SkippedPair>& skipped) {
@@ -633,9 +665,9 @@ std::string calibrationReportYaml(const StereoCalibration& c, const std::vector<
      << "optical_axes_angle_deg: " << exact(c.axes_angle_rad * kRadToDeg) << "\n"
      << "right_camera_centre_mm: " << vec(rig.rightCentre() * 1e3) << "\n"
      << "right_camera_rotation_vector_deg: " << vec(rotationVectorDeg(R_lr)) << "  # left <- right\n"
-     << "R_right_left: " << list({rig.R_rl()(0, 0), rig.R_rl()(0, 1), rig.R_rl()(0, 2), rig.R_rl()(1, 0),
-                                  rig.R_rl()(1, 1), rig.R_rl()(1, 2), rig.R_rl()(2, 0), rig.R_rl()(2, 1),
-                                  rig.R_rl()(2, 2)})
+     << "R_right_left: "
+     << list({rig.R_rl()(0, 0), rig.R_rl()(0, 1), rig.R_rl()(0, 2), rig.R_rl()(1, 0), rig.R_rl()(1, 1),
+              rig.R_rl()(1, 2), rig.R_rl()(2, 0), rig.R_rl()(2, 1), rig.R_rl()(2, 2)})
      << "  # row-major, X_right = R X_left + t\n"
      << "t_right_left_mm: " << vec(rig.t_rl() * 1e3) << "\n";
   cam("left", rig.left(), c.left_mono_rms_px);
@@ -643,7 +675,8 @@ std::string calibrationReportYaml(const StereoCalibration& c, const std::vector<
   os << "rectification:\n"
      << "  converged_rig: " << (c.converged ? "true" : "false") << "\n"
      << "  flags: " << (c.zero_disparity ? "CALIB_ZERO_DISPARITY" : "0") << "\n"
-     << "  alpha: " << exact(c.alpha) << "\n"
+     << "  alpha: " << (c.projection_fitted ? std::string("null  # not used: P fitted") : exact(c.alpha)) << "\n"
+     << "  projection_fitted_to_board: " << (c.projection_fitted ? "true" : "false") << "\n"
      << "  board_corners_inside_both_images: " << c.board_points_inside << "\n"
      << "  board_corners: " << c.board_points.size() << "\n"
      << "  rectified_row_error_median_px: " << exact(c.rect_dv_median_px) << "\n"
@@ -686,7 +719,9 @@ std::string calibrationReportTable(const StereoCalibration& c, const std::vector
         "");
   }
   row("rectification flags / alpha",
-      std::string(c.zero_disparity ? "ZERO_DISPARITY" : "0") + " / " + fixed(c.alpha, 2), "");
+      std::string(c.zero_disparity ? "ZERO_DISPARITY" : "0") + " / " +
+          (c.projection_fitted ? std::string("P fitted") : fixed(c.alpha, 2)),
+      "");
   row("board corners inside both rectified images",
       std::to_string(c.board_points_inside) + " / " + std::to_string(c.board_points.size()), "");
   row("rectified row error |dv| median / max", fixed(c.rect_dv_median_px, 3) + " / " + fixed(c.rect_dv_max_px, 3),

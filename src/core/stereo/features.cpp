@@ -6,10 +6,10 @@
 //  - KAZE  (the thesis' choice): cv::KAZE(extended = false, upright = false, threshold = options.threshold,
 //    4 octaves x 4 sublevels, PM_G2 diffusivity): 64-float descriptors (CV_32F), compared with L2.
 //  - AKAZE: cv::AKAZE with its default binary MLDB descriptor (rotation-invariant, 486 bits stored in 61
-//    bytes, CV_8U), compared with the Hamming distance; threshold = options.threshold. MLDB is what makes
-//    AKAZE fast and it is rotation-invariant (a hand-held rig rolls between frames, which matters to the
-//    SLAM's frame-to-map association); the 64-float alternative (DESCRIPTOR_KAZE_UPRIGHT) would give up
-//    the rotation invariance and most of the speed advantage over KAZE.
+//    bytes, CV_8U), compared with the Hamming distance; threshold = options.threshold. MLDB is AKAZE's
+//    native descriptor, the cheapest to compute (the 64-float DESCRIPTOR_KAZE[_UPRIGHT] cost ~20 % more
+//    per image on the rendered globe), and it is rotation-invariant, which the UPRIGHT float variant is not
+//    (a hand-held rig rolls between frames: that matters to the SLAM's frame-to-map association).
 //  - ORB: cv::ORB (nfeatures = max_features, or 100000 for "all"; 8 levels, scale 1.2, Harris score,
 //    31 px patch), rBRIEF 256 bits (32 bytes, CV_8U), Hamming. FAST threshold = options.threshold if
 //    > 1 (rounded), else OpenCV's default 20.
@@ -29,7 +29,11 @@
 // the buckets of its row band and, by binary search, at the u-interval of the disparity window.
 // Ratio test: best < ratio * second-best descriptor distance (L2 or Hamming); ratio = 1 switches the test
 // off (ties accepted). Cross-check: the left keypoint must be the unique best left candidate (same row and
-// disparity constraints, seen from the right keypoint); a tie counts as ambiguous and is rejected. Without
+// disparity constraints, seen from the right keypoint); a tie counts as ambiguous and is rejected. Distances
+// are compared at a resolution of 1e-5 (below it, the difference between the float descriptors of two exact
+// copies of a patch is rounding noise: a tie, not a distinctive match). A left keypoint with a single
+// candidate is accepted with strength 1 whatever its descriptor distance (there is no absolute distance
+// threshold in FeatureOptions); the cross-check is then its only guard. Without
 // cross_check several left keypoints may match the same right keypoint. strength = 1 - best / second-best
 // (1 with a single candidate), floored at FLT_EPSILON so that it stays in (0, 1] when ratio = 1 lets ties
 // through. StereoMatch::descriptor: the left descriptor's floats; for binary descriptors one float (0 or 1)
@@ -91,8 +95,8 @@ cv::Mat toGray8(const cv::Mat& image, const char* who) {
       cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY);
       return gray;
     default:
-      throw std::invalid_argument(std::string(who) + ": the image must have 1, 3 or 4 channels (got " +
-                                  matType(image) + ")");
+      throw std::invalid_argument(std::string(who) + ": the image must have 1, 3 or 4 channels (got " + matType(image) +
+                                  ")");
   }
 }
 
@@ -189,6 +193,11 @@ class RowIndex {
   int row0_ = 0;
   std::vector<std::vector<std::pair<float, int>>> buckets_;
 };
+
+/** Descriptor distances closer than this are equal: KAZE's unit-norm float descriptors of two exact copies of
+ *  a patch differ by float rounding (~1e-7), which must not decide a ratio test or a cross-check. Hamming
+ *  distances are integers, unaffected. */
+constexpr double kDistanceResolution = 1e-5;
 
 /** Distance between descriptor rows: squared L2 (float) or Hamming (binary). */
 class Distance {
@@ -292,7 +301,9 @@ void FeatureOptions::validate() const {
   if (!std::isfinite(disparity_offset)) badOption("disparity_offset", disparity_offset, "must be finite (px)");
 }
 
-StereoFeatureMatcher::StereoFeatureMatcher(const FeatureOptions& options) : options_(options) { options_.validate(); }
+StereoFeatureMatcher::StereoFeatureMatcher(const FeatureOptions& options) : options_(options) {
+  options_.validate();
+}
 
 ImageFeatures StereoFeatureMatcher::detect(const cv::Mat& image) const {
   ImageFeatures f;
@@ -342,27 +353,29 @@ std::vector<StereoMatch> StereoFeatureMatcher::match(const ImageFeatures& left, 
   };
   const double slack = 1e-3;  // px, generous bucket/interval search; admissible() decides
 
-  // Best left candidate of a right keypoint: index, -1 if ambiguous (tie) or none; computed on demand.
+  // Best left candidate of a right keypoint: its index, or -1 if there is none or it is not unique (another
+  // candidate within kDistanceResolution of it); computed on demand.
   std::vector<int> best_left(kr.size(), -2);
   const auto bestLeftOf = [&](int r) {
     if (best_left[r] != -2) return best_left[r];
     const double u = kr[r].pt.x, v = kr[r].pt.y;
-    double best = std::numeric_limits<double>::infinity();
+    double best = std::numeric_limits<double>::infinity(), second = best;
     int idx = -1;
-    bool tie = false;
-    left_rows.forEach(v - o.max_row_diff - slack, v + o.max_row_diff + slack, u + o.disparity_offset + o.min_disparity - slack,
+    left_rows.forEach(v - o.max_row_diff - slack, v + o.max_row_diff + slack,
+                      u + o.disparity_offset + o.min_disparity - slack,
                       u + o.disparity_offset + o.max_disparity + slack, [&](int l) {
                         if (!admissible(l, r)) return;
                         const double c = dist.cost(l, r);
                         if (c < best) {
+                          second = best;
                           best = c;
                           idx = l;
-                          tie = false;
-                        } else if (c == best) {
-                          tie = true;
+                        } else if (c < second) {
+                          second = c;
                         }
                       });
-    best_left[r] = tie ? -1 : idx;
+    const bool unique = std::isinf(second) || dist.distance(second) - dist.distance(best) > kDistanceResolution;
+    best_left[r] = unique ? idx : -1;
     return best_left[r];
   };
 
@@ -370,7 +383,8 @@ std::vector<StereoMatch> StereoFeatureMatcher::match(const ImageFeatures& left, 
     const double u = kl[l].pt.x, v = kl[l].pt.y;
     double best = std::numeric_limits<double>::infinity(), second = best;
     int best_r = -1, n = 0;
-    right_rows.forEach(v - o.max_row_diff - slack, v + o.max_row_diff + slack, u - o.disparity_offset - o.max_disparity - slack,
+    right_rows.forEach(v - o.max_row_diff - slack, v + o.max_row_diff + slack,
+                       u - o.disparity_offset - o.max_disparity - slack,
                        u - o.disparity_offset - o.min_disparity + slack, [&](int r) {
                          if (!admissible(l, r)) return;
                          ++n;
@@ -387,13 +401,14 @@ std::vector<StereoMatch> StereoFeatureMatcher::match(const ImageFeatures& left, 
     ++st.candidates;
     float strength = 1.0f;
     if (n > 1) {
-      const double b = dist.distance(best), s = dist.distance(second);
+      // Distances below the resolution are rounding noise of the descriptor computation (exact copies).
+      const double b = std::max(dist.distance(best), kDistanceResolution);
+      const double s = std::max(dist.distance(second), kDistanceResolution);
       if (o.ratio < 1.0 && !(b < o.ratio * s)) {
         ++st.ratio_rejected;
         continue;
       }
-      strength = s > 0 ? static_cast<float>(1.0 - b / s) : 0.0f;
-      strength = std::min(1.0f, std::max(FLT_EPSILON, strength));
+      strength = std::min(1.0f, std::max(FLT_EPSILON, static_cast<float>(1.0 - b / s)));
     }
     if (o.cross_check && bestLeftOf(best_r) != l) {
       ++st.cross_rejected;
@@ -435,7 +450,8 @@ std::vector<StereoMatch> StereoFeatureMatcher::process(const cv::Mat& left_rect,
   return match(fl, fr, stats);
 }
 
-cv::Mat drawStereoMatches(const cv::Mat& left_rect, const cv::Mat& right_rect, const std::vector<StereoMatch>& matches) {
+cv::Mat drawStereoMatches(const cv::Mat& left_rect, const cv::Mat& right_rect,
+                          const std::vector<StereoMatch>& matches) {
   const cv::Mat l = toBgr8(left_rect), r = toBgr8(right_rect);
   const int width = l.cols + r.cols, height = std::max(l.rows, r.rows);
   if (width == 0 || height == 0) return cv::Mat();

@@ -56,6 +56,40 @@ bool inside(const RectifiedPair& p, const Eigen::Vector3d& X, double margin) {
 
 }  // namespace
 
+/*
+ * Rectified projections fitted to points of interest (left frame): the rotations of `p` are kept; one focal
+ * length (at most f_max), one row centre, and a principal point per camera put every point inside both images
+ * with `margin` px to spare. False if a point is not in front of both rectified cameras.
+ */
+bool fitRectifiedProjection(RectifiedPair* p, const std::vector<Eigen::Vector3d>& pts, double f_max, double margin) {
+  const double f0 = f_max, B = -p->right.P(0, 3) / p->right.P(0, 0);
+  const double W = p->left.width, H = p->left.height;
+  double xl[2] = {1e300, -1e300}, xr[2] = {1e300, -1e300}, y[2] = {1e300, -1e300};
+  for (const auto& X : pts) {
+    const Eigen::Vector3d Xl = p->left.R * X;
+    if (!(Xl.z() > 1e-9 * X.norm())) return false;
+    const double a = Xl.x() / Xl.z(), b = (Xl.x() - B) / Xl.z(), c = Xl.y() / Xl.z();
+    xl[0] = std::min(xl[0], a), xl[1] = std::max(xl[1], a);
+    xr[0] = std::min(xr[0], b), xr[1] = std::max(xr[1], b);
+    y[0] = std::min(y[0], c), y[1] = std::max(y[1], c);
+  }
+  // Usable pixels are [margin, size - 1 - margin].
+  double f = f0;
+  if (xl[1] > xl[0]) f = std::min(f, (W - 1 - 2 * margin) / (xl[1] - xl[0]));
+  if (xr[1] > xr[0]) f = std::min(f, (W - 1 - 2 * margin) / (xr[1] - xr[0]));
+  if (y[1] > y[0]) f = std::min(f, (H - 1 - 2 * margin) / (y[1] - y[0]));
+  f *= 0.999;  // rounding
+  if (!(f > 0.0) || !std::isfinite(f)) return false;
+  const double cxl = 0.5 * (W - 1) - f * 0.5 * (xl[0] + xl[1]), cxr = 0.5 * (W - 1) - f * 0.5 * (xr[0] + xr[1]);
+  const double cy = 0.5 * (H - 1) - f * 0.5 * (y[0] + y[1]);
+  p->left.P << f, 0, cxl, 0, 0, f, cy, 0, 0, 0, 1, 0;
+  p->right.P << f, 0, cxr, -f * B, 0, f, cy, 0, 0, 0, 1, 0;
+  p->zero_disparity = false;
+  p->projection_fitted = true;
+  return true;
+}
+
+
 Eigen::Vector2d projectRectified(const RectifiedPair& pair, const Eigen::Vector3d& X_left, bool right) {
   const Eigen::Vector3d Xr = pair.left.R * X_left;  // rectified left frame
   const Eigen::Matrix<double, 3, 4>& P = right ? pair.right.P : pair.left.P;
@@ -66,14 +100,29 @@ Eigen::Vector2d projectRectified(const RectifiedPair& pair, const Eigen::Vector3
 RectifiedPair rectifyStereo(const geometry::StereoRig& rig, const std::vector<Eigen::Vector3d>& points_of_interest,
                             double margin_px) {
   if (points_of_interest.empty()) return rectifyWith(rig, cv::CALIB_ZERO_DISPARITY, 0.0);
-  for (double alpha : {0.0, 0.25, 0.5, 0.75, 1.0}) {
-    const RectifiedPair p = rectifyWith(rig, 0, alpha);
-    bool ok = true;
-    for (const auto& X : points_of_interest) ok = ok && inside(p, X, margin_px);
+  for (const auto& X : points_of_interest) {
+    Eigen::Vector2d uvl, uvr;
+    if (!rig.project(X, &uvl, &uvr) || !rig.left().inImage(uvl) || !rig.right().inImage(uvr)) {
+      std::ostringstream os;
+      os << "rectification: the point of interest (" << X.transpose() << ") m is not seen by both raw cameras; the "
+         << "working area must lie in both images";
+      throw std::runtime_error(os.str());
+    }
+  }
+  RectifiedPair p = rectifyWith(rig, 0, 0.0);
+  bool ok = true;
+  for (const auto& X : points_of_interest) ok = ok && inside(p, X, margin_px);
+  if (ok) return p;
+  // OpenCV's alpha > 0 degenerates for strongly converged rigs (principal point outside the image, focal
+  // length tiny or negative): keep its rotations and fit the projections to the points instead.
+  const double f_raw = 0.25 * (rig.left().fx() + rig.left().fy() + rig.right().fx() + rig.right().fy());
+  if (fitRectifiedProjection(&p, points_of_interest, f_raw, margin_px)) {
+    ok = true;
+    for (const auto& X : points_of_interest) ok = ok && inside(p, X, margin_px * 0.5);
     if (ok) return p;
   }
   std::ostringstream os;
-  os << "rectification: no alpha in [0, 1] keeps all " << points_of_interest.size()
+  os << "rectification: neither alpha 0 nor a fitted projection keeps all " << points_of_interest.size()
      << " points of interest inside both rectified images (flags 0); the working area is not seen by both "
         "cameras, or the output size is too small";
   throw std::runtime_error(os.str());

@@ -7,7 +7,8 @@
  * Publishes:  stereo/landmarks (skin3d/LandmarkArray: position and 3x3 covariance in the left optical
  *             frame, descriptor, strength, rectified pixels), stereo/points (sensor_msgs/PointCloud2,
  *             fields x y z strength, for rviz).
- * Parameters: ~sigma_px (px, 0.5) pixel localisation error of a matched feature; ~min_depth (m, 0.05),
+ * Parameters: ~sigma_px (px, 0 = estimated per frame from the matches' row residuals) pixel localisation
+ *             error of a matched feature; ~min_depth (m, 0.05),
  *             ~max_depth (m, 5.0); ~max_landmarks (0 = all; else the strongest N); ~queue_size (5).
  * Bad input (uncalibrated camera_info, frame mismatch) drops the frame with a throttled warning.
  */
@@ -44,9 +45,10 @@ class StereoTriangulateNodelet : public nodelet::Nodelet {
     pnh.param("max_landmarks", max_landmarks_, 0);
     int queue = 5;
     pnh.param("queue_size", queue, 5);
-    if (!(options_.sigma_px > 0.0)) {
-      NODELET_ERROR("stereo_triangulate: ~sigma_px = %g must be > 0; using 0.5", options_.sigma_px);
-      options_.sigma_px = 0.5;
+    if (!(options_.sigma_px >= 0.0)) {
+      NODELET_ERROR("stereo_triangulate: ~sigma_px = %g must be >= 0 (0: estimated per frame); using 0",
+                    options_.sigma_px);
+      options_.sigma_px = 0.0;
     }
     if (!(options_.max_depth > options_.min_depth) || options_.min_depth < 0.0) {
       NODELET_ERROR("stereo_triangulate: need 0 <= ~min_depth (%g) < ~max_depth (%g); using 0.05 and 5",

@@ -52,7 +52,9 @@ void expectRoundTrip(const Fixture& f, const std::vector<Eigen::Vector3d>& pts) 
   std::vector<stereo::StereoMatch> matches;
   for (const auto& X : pts) matches.push_back(f.match(X));
   int dropped = -1;
-  const auto lms = stereo::triangulateMatches(f.pair.left, f.pair.right, matches, {}, &dropped);
+  stereo::TriangulateOptions o;
+  o.sigma_px = 0.5;  // the default of CameraObservation, which the direct triangulation below uses
+  const auto lms = stereo::triangulateMatches(f.pair.left, f.pair.right, matches, o, &dropped);
   ASSERT_EQ(lms.size(), pts.size());
   EXPECT_EQ(dropped, 0);
   for (size_t i = 0; i < pts.size(); ++i) {
@@ -107,13 +109,36 @@ TEST(StereoLandmarks, NoisyMatchesAreConsistentWithTheirCovariance) {
     auto m = f.match(X);
     m.left += Eigen::Vector2d(n(rng), n(rng));
     m.right += Eigen::Vector2d(n(rng), n(rng));
-    const auto l = stereo::triangulateMatches(f.pair.left, f.pair.right, {m}, {});
+    stereo::TriangulateOptions o;
+    o.sigma_px = 0.5;
+    const auto l = stereo::triangulateMatches(f.pair.left, f.pair.right, {m}, o);
     ASSERT_EQ(l.size(), 1u);
     const Eigen::Vector3d e = l[0].position - X;
     nees += e.dot(l[0].covariance.inverse() * e);
     ++count;
   }
   EXPECT_NEAR(nees / count, 3.0, 0.2);  // mean of chi2(3) over 3000 samples: 3 +- 0.045 (1 sigma)
+}
+
+TEST(StereoLandmarks, LocalisationSigmaIsEstimatedFromTheRowResiduals) {
+  const Fixture f(false);
+  std::mt19937 rng(4);
+  for (double sigma : {0.1, 0.3, 0.8}) {
+    std::normal_distribution<double> n(0.0, sigma);
+    std::vector<stereo::StereoMatch> ms;
+    for (int k = 0; k < 2000; ++k) {
+      auto m = f.match(Eigen::Vector3d(0.05 + 0.1 * std::sin(k), 0.05 * std::cos(3.0 * k), 0.45));
+      m.left += Eigen::Vector2d(n(rng), n(rng));
+      m.right += Eigen::Vector2d(n(rng), n(rng));
+      if (k % 50 == 0) m.right.y() += 7.0;  // a few wrong matches
+      ms.push_back(m);
+    }
+    EXPECT_NEAR(stereo::estimateLocalisationSigma(ms), sigma, 0.06 * sigma);
+    double used = 0.0;
+    stereo::triangulateMatches(f.pair.left, f.pair.right, ms, {}, nullptr, &used);  // sigma_px 0: estimated
+    EXPECT_NEAR(used, sigma, 0.06 * sigma);
+  }
+  EXPECT_TRUE(std::isnan(stereo::estimateLocalisationSigma({})));
 }
 
 TEST(StereoLandmarks, DropsImpossibleMatchesAndRejectsUncalibratedInfo) {

@@ -29,18 +29,33 @@ struct StereoLandmark {
 };
 
 struct TriangulateOptions {
-  double sigma_px = 0.5;          //!< pixel localisation error of a matched feature (1 sigma)
+  /** Pixel localisation error of a matched feature (1 sigma). 0 (the default): estimated per frame from
+   *  the matches themselves (estimateLocalisationSigma), clamped to [min_sigma_px, max_sigma_px]. */
+  double sigma_px = 0.0;
+  double min_sigma_px = 0.05;
+  double max_sigma_px = 2.0;
   double min_depth = 0.05;        //!< m; matches triangulated nearer are dropped
   double max_depth = 5.0;         //!< m; farther ones too (tiny disparity: useless depth)
 };
 
 /**
+ * @brief Localisation error (1 sigma, px) of the matches' pixels, from their row residuals: on a rectified
+ * pair v_left - v_right of a true match is the difference of two localisation errors, so
+ * sigma = 1.4826 MAD(v_l - v_r) / sqrt(2) (robust to a few wrong matches). It also absorbs any vertical
+ * misalignment left by the calibration. NaN with fewer than 10 matches.
+ */
+double estimateLocalisationSigma(const std::vector<StereoMatch>& matches);
+
+/**
  * @brief Triangulates every match; drops (and counts in *dropped) those behind the rig or out of range.
+ * @param sigma_used if not null: the localisation sigma used (estimated when options.sigma_px is 0; with
+ *        fewer than 10 matches the estimate falls back to 0.5 px).
  * @throws std::invalid_argument if the CameraInfo pair is not a calibrated, rectified stereo pair.
  */
 std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                                const std::vector<StereoMatch>& matches,
-                                               const TriangulateOptions& options, int* dropped = nullptr);
+                                               const TriangulateOptions& options, int* dropped = nullptr,
+                                               double* sigma_used = nullptr);
 
 }  // namespace stereo
 }  // namespace skin3d

@@ -2,7 +2,9 @@
 #include "skin3d/stereo/stereo_landmarks.h"
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -28,12 +30,27 @@ void checkP(const geometry::CameraInfo& c, const char* side) {
 }
 }  // namespace
 
+double estimateLocalisationSigma(const std::vector<StereoMatch>& matches) {
+  if (matches.size() < 10) return std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> dv;
+  dv.reserve(matches.size());
+  for (const auto& m : matches) dv.push_back(m.left.y() - m.right.y());
+  const auto mid = dv.begin() + dv.size() / 2;
+  std::nth_element(dv.begin(), mid, dv.end());
+  const double med = *mid;
+  for (auto& d : dv) d = std::abs(d - med);
+  std::nth_element(dv.begin(), mid, dv.end());
+  return 1.4826 * *mid / std::sqrt(2.0);
+}
+
 std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                                const std::vector<StereoMatch>& matches,
-                                               const TriangulateOptions& options, int* dropped) {
+                                               const TriangulateOptions& options, int* dropped, double* sigma_used) {
   checkP(left, "left");
   checkP(right, "right");
-  if (!(options.sigma_px > 0.0)) throw std::invalid_argument("triangulate: sigma_px must be > 0");
+  if (!(options.sigma_px >= 0.0)) throw std::invalid_argument("triangulate: sigma_px must be >= 0 (0: estimated)");
+  if (!(options.min_sigma_px > 0.0) || !(options.max_sigma_px >= options.min_sigma_px))
+    throw std::invalid_argument("triangulate: need 0 < min_sigma_px <= max_sigma_px");
   if (!(options.max_depth > options.min_depth)) throw std::invalid_argument("triangulate: max_depth must be > min_depth");
   if (std::abs(right.P(0, 3)) <= 0.0)
     throw std::invalid_argument("right camera_info P[3] (Tx = -fx * baseline) is 0: not a stereo pair");
@@ -44,7 +61,13 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
   views[0].t = views[0].K.inverse() * left.P.col(3);
   views[1].K = right.P.leftCols<3>();
   views[1].t = views[1].K.inverse() * right.P.col(3);
-  const Eigen::Matrix2d cov = options.sigma_px * options.sigma_px * Eigen::Matrix2d::Identity();
+  double sigma = options.sigma_px;
+  if (sigma == 0.0) {
+    sigma = estimateLocalisationSigma(matches);
+    sigma = std::isnan(sigma) ? 0.5 : std::min(options.max_sigma_px, std::max(options.min_sigma_px, sigma));
+  }
+  if (sigma_used) *sigma_used = sigma;
+  const Eigen::Matrix2d cov = sigma * sigma * Eigen::Matrix2d::Identity();
   views[0].cov_uv = views[1].cov_uv = cov;
   const Eigen::Matrix3d Rt = left.R.transpose();  // raw left <- rectified left
 

@@ -1,0 +1,160 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The front end's landmarks against the rendered globe's ground truth (issue 4 quality bar): a
+// globe-images bag is made by the real tool, then rectified, matched and triangulated with the core
+// exactly as the nodelets do; errors are measured against the true sphere.
+#include <geometry_msgs/PoseStamped.h>
+#include <gtest/gtest.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sys/wait.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <numeric>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "skin3d/stereo/features.h"
+#include "skin3d/stereo/stereo_landmarks.h"
+
+using namespace skin3d;
+
+namespace {
+
+const std::string kBin = SKIN3D_MAKE_DATASET_BIN;
+
+std::string tmp(const std::string& name) { return ::testing::TempDir() + "skin3d_frontend_acc_" + name; }
+
+template <class M>
+std::vector<M> read(const std::string& bag_path, const std::string& topic) {
+  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+  rosbag::View view(bag, rosbag::TopicQuery(topic));
+  std::vector<M> out;
+  for (const auto& m : view) out.push_back(*m.instantiate<M>());
+  return out;
+}
+
+geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
+  geometry::CameraInfo c;
+  c.width = m.width;
+  c.height = m.height;
+  c.D = m.D;
+  for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = m.K[i];
+  for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
+  for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
+  return c;
+}
+
+cv::Mat rectify(const sensor_msgs::Image& img, const geometry::CameraInfo& c) {
+  cv::Mat K, D(c.D), R, P, m1, m2, out;
+  cv::eigen2cv(c.K, K);
+  cv::eigen2cv(c.R, R);
+  cv::eigen2cv(c.P, P);
+  cv::initUndistortRectifyMap(K, D, R, P, cv::Size(c.width, c.height), CV_32FC1, m1, m2);
+  const cv::Mat raw(img.height, img.width, CV_8UC1, const_cast<uint8_t*>(img.data.data()), img.step);
+  cv::remap(raw, out, m1, m2, cv::INTER_LINEAR);
+  return out;
+}
+
+struct Stats {
+  std::vector<int> per_frame;
+  std::vector<double> abs_radial_mm;
+  std::vector<double> z2_normal;  // squared radial error / predicted radial variance
+  double rms_radial_mm = 0.0;
+};
+
+// Landmarks of every frame against the true sphere: along the surface normal, error / predicted sigma.
+Stats evaluate(const std::string& bag, const std::string& truth_path, stereo::FeatureType type, double sigma_px) {
+  const YAML::Node truth = YAML::LoadFile(truth_path);
+  const auto& c = truth["sphere"]["centre_world_m"];
+  const Eigen::Vector3d centre_w(c[0].as<double>(), c[1].as<double>(), c[2].as<double>());
+  const double radius = truth["sphere"]["radius_m"].as<double>();
+  const auto li = read<sensor_msgs::CameraInfo>(bag, "stereo/left/camera_info");
+  const auto ri = read<sensor_msgs::CameraInfo>(bag, "stereo/right/camera_info");
+  const auto limg = read<sensor_msgs::Image>(bag, "stereo/left/image_raw");
+  const auto rimg = read<sensor_msgs::Image>(bag, "stereo/right/image_raw");
+  const auto poses = read<geometry_msgs::PoseStamped>(bag, "ground_truth/pose");
+  const geometry::CameraInfo L = fromMsg(li[0]), R = fromMsg(ri[0]);
+  stereo::FeatureOptions fo;
+  fo.type = type;
+  fo.disparity_offset = L.P(0, 2) - R.P(0, 2);
+  const stereo::StereoFeatureMatcher matcher(fo);
+  stereo::TriangulateOptions to;
+  to.sigma_px = sigma_px;
+  Stats s;
+  double sum_sq = 0.0;
+  for (size_t k = 0; k < limg.size(); ++k) {
+    const auto matches = matcher.process(rectify(limg[k], L), rectify(rimg[k], R));
+    const auto lms = stereo::triangulateMatches(L, R, matches, to);
+    s.per_frame.push_back(static_cast<int>(lms.size()));
+    const auto& p = poses[k].pose;
+    Eigen::Isometry3d T_W_L = Eigen::Isometry3d::Identity();
+    T_W_L.translation() = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
+    T_W_L.linear() = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z).toRotationMatrix();
+    const Eigen::Vector3d centre = T_W_L.inverse() * centre_w;
+    for (const auto& l : lms) {
+      const Eigen::Vector3d d = l.position - centre;
+      const Eigen::Vector3d n = d.normalized();
+      const double e = d.norm() - radius;
+      s.z2_normal.push_back(e * e / n.dot(l.covariance * n));
+      s.abs_radial_mm.push_back(1e3 * std::abs(e));
+      sum_sq += e * e;
+    }
+  }
+  s.rms_radial_mm = 1e3 * std::sqrt(sum_sq / std::max<size_t>(1, s.z2_normal.size()));
+  return s;
+}
+
+int run(const std::string& args) {
+  const int rc = std::system((kBin + " " + args + " > /dev/null 2>&1").c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+void report(const char* name, const Stats& s) {
+  std::vector<int> n = s.per_frame;
+  std::sort(n.begin(), n.end());
+  std::vector<double> z = s.z2_normal;
+  std::sort(z.begin(), z.end());
+  std::vector<double> a = s.abs_radial_mm;
+  std::sort(a.begin(), a.end());
+  const size_t inliers = std::lower_bound(z.begin(), z.end(), 10.83) - z.begin();  // chi2(1) 99.9 %
+  const double inlier_mean = std::accumulate(z.begin(), z.begin() + inliers, 0.0) / std::max<size_t>(1, inliers);
+  std::printf("%s: landmarks/frame min %d median %d max %d; |radial error| median %.3f mm, 90%% %.3f mm, RMS %.1f mm; "
+              "z2 = (radial error)^2 / predicted variance: median %.3f (chi2(1): 0.455), %.1f %% beyond 10.83 "
+              "(chi2(1): 0.1 %%), mean of the rest %.3f (chi2(1) truncated: 0.99); %zu landmarks\n",
+              name, n.front(), n[n.size() / 2], n.back(), a[a.size() / 2], a[a.size() * 9 / 10], s.rms_radial_mm,
+              z[z.size() / 2], 100.0 * (z.size() - inliers) / z.size(), inlier_mean, z.size());
+}
+
+}  // namespace
+
+// Prints the figures of merit (see the issue notes) and checks what the front end does guarantee today:
+// enough landmarks for SLAM, and sub-millimetre depth with an exact calibration. The covariance-consistency
+// bar (chi2) is NOT asserted: the error distribution is heavy-tailed (mismatches at the limb), see the report.
+TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
+  const std::string bag = tmp("globe.bag");
+  ASSERT_EQ(run("globe-images --quiet --frames 6 --out " + bag), 0);
+  const Stats s = evaluate(bag, tmp("globe.truth.yaml"), stereo::FeatureType::KAZE, 0.0);
+  report("KAZE, realism on (perturbed calibration)", s);
+  ASSERT_FALSE(s.z2_normal.empty());
+  EXPECT_GE(*std::min_element(s.per_frame.begin(), s.per_frame.end()), 100) << "too few landmarks for SLAM";
+
+  std::ofstream(tmp("exact.yaml")) << "images: {calibration_error: {enabled: false}}\n";
+  ASSERT_EQ(run("globe-images --quiet --frames 6 --config " + tmp("exact.yaml") + " --out " + tmp("exact.bag")), 0);
+  for (auto type : {stereo::FeatureType::KAZE, stereo::FeatureType::AKAZE}) {
+    const Stats e = evaluate(tmp("exact.bag"), tmp("exact.truth.yaml"), type, 0.0);
+    report((stereo::featureTypeName(type) + ", realism on, exact calibration").c_str(), e);
+    EXPECT_GE(*std::min_element(e.per_frame.begin(), e.per_frame.end()), 100);
+    // At 400 mm one pixel of disparity is 1.88 mm of depth: a median error below 0.5 mm means the matches are
+    // localised to about a quarter pixel through blur, noise and photometric differences.
+    std::vector<double> a = e.abs_radial_mm;
+    std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+    EXPECT_LT(a[a.size() / 2], 0.5) << stereo::featureTypeName(type);
+  }
+}

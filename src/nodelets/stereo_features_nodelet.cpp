@@ -8,6 +8,7 @@
  * Publishes:  stereo/matches (skin3d/StereoMatchArray), stereo/matches_image (bgr8 debug picture, only
  *             computed while someone subscribes).
  * Parameters: ~feature_type (kaze | akaze | orb, kaze), ~threshold (0.001), ~max_features (3000),
+ *             ~octaves (4), ~octave_layers (4) of the KAZE/AKAZE scale space (fewer: faster, fewer features),
  *             ~ratio (0.8), ~max_row_diff (px, 1.5), ~min_disparity (px, 0.5), ~max_disparity (px, 1e9),
  *             ~cross_check (true), ~queue_size (5), ~approximate_sync (false).
  * Bad input (empty/black/textureless images, sizes, encodings, no features, no matches) drops the frame
@@ -45,6 +46,8 @@ class StereoFeaturesNodelet : public nodelet::Nodelet {
     pnh.param<std::string>("feature_type", type, "kaze");
     pnh.param("threshold", o.threshold, o.threshold);
     pnh.param("max_features", o.max_features, o.max_features);
+    pnh.param("octaves", o.octaves, o.octaves);
+    pnh.param("octave_layers", o.octave_layers, o.octave_layers);
     pnh.param("ratio", o.ratio, o.ratio);
     pnh.param("max_row_diff", o.max_row_diff, o.max_row_diff);
     pnh.param("min_disparity", o.min_disparity, o.min_disparity);

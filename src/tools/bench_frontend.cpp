@@ -53,7 +53,8 @@ const char* kUsage =
     "usage: bench_frontend --bag FILE.bag [--frames N] [--features kaze|akaze|orb|all]\n"
     "  --bag FILE.bag   a globe-images bag: stereo/{left,right}/image_raw (mono8) and camera_info\n"
     "  --frames N       only the first N stereo pairs (default: all)\n"
-    "  --features T     kaze, akaze, orb or all (default: all)\n";
+    "  --features T     kaze, akaze, orb or all (default: all)\n"
+    "  --octaves N, --layers N   KAZE/AKAZE scale space (default 4 x 4)\n";
 
 struct RawPair {
   cv::Mat left, right;
@@ -159,14 +160,18 @@ struct Result {
 };
 
 Result run(stereo::FeatureType type, const std::vector<RawPair>& frames, const geometry::CameraInfo& li,
-           const geometry::CameraInfo& ri, const Maps& lm, const Maps& rm) {
+           const geometry::CameraInfo& ri, const Maps& lm, const Maps& rm, int octaves, int layers) {
   stereo::FeatureOptions opt;
   opt.type = type;
+  opt.octaves = octaves;
+  opt.octave_layers = layers;
   opt.disparity_offset = li.P(0, 2) - ri.P(0, 2);
   const stereo::StereoFeatureMatcher matcher(opt);
   const stereo::TriangulateOptions tri;
   Result r;
   r.name = stereo::featureTypeName(type);
+  if (type != stereo::FeatureType::ORB && (octaves != 4 || layers != 4))
+    r.name += " (" + std::to_string(octaves) + "x" + std::to_string(layers) + ")";
   for (size_t k = 0; k <= frames.size(); ++k) {
     const bool warm_up = k == 0;  // frame 0 once untimed, then every frame timed
     const RawPair& f = frames[warm_up ? 0 : k - 1];
@@ -222,6 +227,7 @@ std::string fixed(double v, int digits) {
 int main(int argc, char** argv) {
   std::string bag_path, features = "all";
   long frames_wanted = -1;
+  int octaves = 4, layers = 4;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
@@ -232,6 +238,12 @@ int main(int argc, char** argv) {
       bag_path = argv[++i];
     } else if (a == "--features" && has_value) {
       features = argv[++i];
+    } else if ((a == "--octaves" || a == "--layers") && has_value) {
+      (a == "--octaves" ? octaves : layers) = std::atoi(argv[++i]);
+      if ((a == "--octaves" ? octaves : layers) < 1) {
+        std::cerr << "bench_frontend: " << a << " must be a positive integer\n" << kUsage;
+        return 2;
+      }
     } else if (a == "--frames" && has_value) {
       char* end = nullptr;
       frames_wanted = std::strtol(argv[++i], &end, 10);
@@ -312,7 +324,7 @@ int main(int argc, char** argv) {
     for (stereo::FeatureType t : types) {
       std::cerr << "bench_frontend: " << stereo::featureTypeName(t) << " on " << frames.size() << " frames ..."
                 << std::endl;
-      results.push_back(run(t, frames, left_info, right_info, lm, rm));
+      results.push_back(run(t, frames, left_info, right_info, lm, rm, octaves, layers));
     }
   } catch (const std::exception& e) {
     std::cerr << "bench_frontend: " << e.what() << "\n";

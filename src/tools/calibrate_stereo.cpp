@@ -55,7 +55,7 @@ const char* kUsage =
     "  --fix-intrinsic       stereo step keeps each camera's own calibration (ROS camera_calibration's way);\n"
     "                        default: both cameras refined jointly with the extrinsics\n"
     "  --converged-deg A     axes angle above which the rig counts as converged (default 15): rectified with\n"
-    "                        flags 0 and the smallest alpha that keeps the boards inside both images\n"
+    "                        flags 0, alpha 0, or projections fitted to keep the boards inside both images\n"
     "  --left-name NAME      camera_name in left.yaml (default 'left'); --right-name likewise ('right')\n"
     "  --quiet               no progress lines and no table (warnings and errors still go to stderr)\n"
     "exit codes: 0 ok, 1 bad input, 2 bad command line, 3 cannot write the output\n";

@@ -32,6 +32,8 @@ struct FeatureOptions {
   FeatureType type = FeatureType::KAZE;
   double threshold = 0.001;       //!< detector response threshold (KAZE/AKAZE); ORB: FAST threshold if > 1
   int max_features = 3000;        //!< strongest features kept per image (0 = all)
+  int octaves = 4;                //!< KAZE/AKAZE scale-space octaves (OpenCV's default 4; fewer is faster)
+  int octave_layers = 4;          //!< KAZE/AKAZE sublevels per octave (default 4)
   double ratio = 0.8;             //!< Lowe's ratio test
   double max_row_diff = 1.5;      //!< px, epipolar (row) tolerance on rectified images
   double min_disparity = 0.5;     //!< px, geometric disparity (after the principal-point offset)

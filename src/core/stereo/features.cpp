@@ -104,9 +104,10 @@ cv::Ptr<cv::Feature2D> makeDetector(const FeatureOptions& o) {
   const float threshold = static_cast<float>(o.threshold);
   switch (o.type) {
     case FeatureType::KAZE:
-      return cv::KAZE::create(false, false, threshold, 4, 4, cv::KAZE::DIFF_PM_G2);
+      return cv::KAZE::create(false, false, threshold, o.octaves, o.octave_layers, cv::KAZE::DIFF_PM_G2);
     case FeatureType::AKAZE:
-      return cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, threshold, 4, 4, cv::KAZE::DIFF_PM_G2);
+      return cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, threshold, o.octaves, o.octave_layers,
+                               cv::KAZE::DIFF_PM_G2);
     case FeatureType::ORB: {
       const int nfeatures = o.max_features > 0 ? o.max_features : 100000;
       const int fast = o.threshold > 1.0 ? static_cast<int>(std::lround(o.threshold)) : 20;
@@ -292,6 +293,8 @@ void FeatureOptions::validate() const {
   if (type == FeatureType::ORB && threshold > 255.0)
     badOption("threshold", threshold, "an ORB FAST threshold must be <= 255");
   if (max_features < 0) badOption("max_features", max_features, "must be >= 0 (0 = all)");
+  if (octaves < 1 || octaves > 8) badOption("octaves", octaves, "must be in 1..8");
+  if (octave_layers < 1 || octave_layers > 8) badOption("octave_layers", octave_layers, "must be in 1..8");
   if (!(ratio > 0 && ratio <= 1)) badOption("ratio", ratio, "must be in (0, 1]");
   if (!(max_row_diff >= 0) || !std::isfinite(max_row_diff))
     badOption("max_row_diff", max_row_diff, "must be a finite number >= 0 (px)");

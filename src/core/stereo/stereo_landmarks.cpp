@@ -70,11 +70,24 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
   const Eigen::Matrix2d cov = sigma * sigma * Eigen::Matrix2d::Identity();
   views[0].cov_uv = views[1].cov_uv = cov;
   const Eigen::Matrix3d Rt = left.R.transpose();  // raw left <- rectified left
+  double median_dv = 0.0;
+  if (options.row_gate > 0.0 && !matches.empty()) {
+    std::vector<double> dv;
+    dv.reserve(matches.size());
+    for (const auto& m : matches) dv.push_back(m.left.y() - m.right.y());
+    std::nth_element(dv.begin(), dv.begin() + dv.size() / 2, dv.end());
+    median_dv = dv[dv.size() / 2];
+  }
+  const double max_dv = options.row_gate > 0.0 ? options.row_gate * std::sqrt(2.0) * sigma : 1e300;
 
   std::vector<StereoLandmark> out;
   out.reserve(matches.size());
   int n_dropped = 0;
   for (const auto& m : matches) {
+    if (std::abs(m.left.y() - m.right.y() - median_dv) > max_dv) {
+      ++n_dropped;
+      continue;
+    }
     views[0].uv = m.left;
     views[1].uv = m.right;
     const geometry::TriangulationResult r = geometry::triangulateMmse(views);

@@ -40,6 +40,7 @@
 #include <thread>
 #include <vector>
 
+#include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/features.h"
 #include "skin3d/stereo/stereo_landmarks.h"
@@ -64,17 +65,7 @@ double ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
-  geometry::CameraInfo c;
-  c.width = static_cast<int>(m.width);
-  c.height = static_cast<int>(m.height);
-  c.distortion_model = m.distortion_model;
-  c.D = m.D;
-  for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = m.K[i];
-  for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
-  for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
-  return c;
-}
+using skin3d::ros_conv::fromMsg;
 
 /** mono8 (or bgr8 / rgb8, converted to grey) image message to cv::Mat; throws on other encodings. */
 cv::Mat fromMsg(const sensor_msgs::Image& m) {

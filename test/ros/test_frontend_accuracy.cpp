@@ -20,6 +20,7 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/stereo/features.h"
 #include "skin3d/stereo/stereo_landmarks.h"
 
@@ -40,16 +41,7 @@ std::vector<M> read(const std::string& bag_path, const std::string& topic) {
   return out;
 }
 
-geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
-  geometry::CameraInfo c;
-  c.width = m.width;
-  c.height = m.height;
-  c.D = m.D;
-  for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = m.K[i];
-  for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
-  for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
-  return c;
-}
+using skin3d::ros_conv::fromMsg;
 
 cv::Mat rectify(const sensor_msgs::Image& img, const geometry::CameraInfo& c) {
   cv::Mat K, D(c.D), R, P, m1, m2, out;

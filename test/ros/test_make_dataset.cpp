@@ -21,6 +21,7 @@
 #include <numeric>
 #include <random>
 
+#include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/geometry/stereo_rig.h"
 
@@ -74,17 +75,7 @@ Eigen::Isometry3d toIso(const geometry_msgs::PoseStamped& p) {
   return T;
 }
 
-geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
-  geometry::CameraInfo c;
-  c.width = m.width;
-  c.height = m.height;
-  c.distortion_model = m.distortion_model;
-  c.D = m.D;
-  for (int i = 0; i < 9; ++i) c.K(i / 3, i % 3) = m.K[i];
-  for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
-  for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
-  return c;
-}
+using skin3d::ros_conv::fromMsg;
 
 Eigen::Vector3d vec3(const YAML::Node& n) { return Eigen::Vector3d(n[0].as<double>(), n[1].as<double>(), n[2].as<double>()); }
 

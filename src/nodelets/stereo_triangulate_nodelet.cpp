@@ -9,7 +9,9 @@
  *             fields x y z strength, for rviz).
  * Parameters: ~sigma_px (px, 0 = estimated per frame from the matches' row residuals) pixel localisation
  *             error of a matched feature; ~min_depth (m, 0.05),
- *             ~max_depth (m, 5.0); ~max_landmarks (0 = all; else the strongest N); ~queue_size (5).
+ *             ~max_depth (m, 5.0); ~max_landmarks (0 = all; else the strongest N); ~queue_size (5);
+ *             ~row_gate (3.0, in sqrt(2) sigma of the row residual; 0 = off); ~disparity_gate (4.0, in robust
+ *             spreads of the disparity residuals of a plane through the ~neighbours (12) nearest matches; 0 = off).
  * Bad input (uncalibrated camera_info, frame mismatch) drops the frame with a throttled warning.
  */
 #include <message_filters/subscriber.h>
@@ -42,6 +44,9 @@ class StereoTriangulateNodelet : public nodelet::Nodelet {
     pnh.param("sigma_px", options_.sigma_px, options_.sigma_px);
     pnh.param("min_depth", options_.min_depth, options_.min_depth);
     pnh.param("max_depth", options_.max_depth, options_.max_depth);
+    pnh.param("row_gate", options_.row_gate, options_.row_gate);
+    pnh.param("disparity_gate", options_.disparity_gate, options_.disparity_gate);
+    pnh.param("neighbours", options_.neighbours, options_.neighbours);
     pnh.param("max_landmarks", max_landmarks_, 0);
     int queue = 5;
     pnh.param("queue_size", queue, 5);

@@ -141,6 +141,37 @@ TEST(StereoLandmarks, LocalisationSigmaIsEstimatedFromTheRowResiduals) {
   EXPECT_TRUE(std::isnan(stereo::estimateLocalisationSigma({})));
 }
 
+TEST(StereoLandmarks, LocalDisparityGateDropsMismatches) {
+  // A smooth surface seen with 0.2 px noise; every 25th match gets a wrong disparity (a mismatch).
+  const Fixture f(false);
+  std::mt19937 rng(8);
+  std::normal_distribution<double> n(0.0, 0.2);
+  std::vector<stereo::StereoMatch> ms;
+  std::vector<bool> wrong;
+  for (int i = 0; i < 600; ++i) {
+    const double x = -0.1 + 0.3 * ((i * 37) % 600) / 600.0, y = -0.1 + 0.2 * ((i * 91) % 600) / 600.0;
+    auto m = f.match(Eigen::Vector3d(x, y, 0.45 + 0.3 * x * x));
+    m.left += Eigen::Vector2d(n(rng), n(rng));
+    m.right += Eigen::Vector2d(n(rng), n(rng));
+    const bool bad = i % 25 == 0;
+    if (bad) m.right.x() += (i % 50 == 0 ? 6.0 : -6.0);
+    ms.push_back(m);
+    wrong.push_back(bad);
+  }
+  stereo::TriangulateOptions o;
+  o.row_gate = 0.0;  // only the disparity gate
+  int dropped = 0;
+  const auto lms = stereo::triangulateMatches(f.pair.left, f.pair.right, ms, o, &dropped);
+  int bad_kept = 0;
+  for (const auto& l : lms)
+    for (size_t i = 0; i < ms.size(); ++i)
+      if (wrong[i] && (l.uv_left - ms[i].left).norm() < 1e-9) ++bad_kept;
+  EXPECT_EQ(bad_kept, 0) << "mismatches survived the gate";
+  EXPECT_LE(dropped, 24 + 6) << "the gate also dropped too many good matches";  // 24 wrong, <1 % of good ones
+  o.disparity_gate = 0.0;
+  EXPECT_EQ(stereo::triangulateMatches(f.pair.left, f.pair.right, ms, o).size(), ms.size());
+}
+
 TEST(StereoLandmarks, DropsImpossibleMatchesAndRejectsUncalibratedInfo) {
   const Fixture f(false);
   stereo::StereoMatch behind;  // negative disparity: behind the rig

@@ -37,6 +37,12 @@ struct TriangulateOptions {
   /** Epipolar gate: matches whose row residual v_l - v_r is further than row_gate * sqrt(2) sigma from the
    *  median residual are dropped (0 = no gate). 3 keeps 99.7 % of true matches. */
   double row_gate = 3.0;
+  /** Local disparity-consistency gate: the disparity of each match is compared with a plane fitted to the
+   *  disparities of its `neighbours` nearest matches (left image); matches further than disparity_gate times
+   *  max(robust spread of the neighbours' residuals, sqrt(2) sigma) are dropped as mismatches (a smooth
+   *  surface has a locally smooth disparity). 0 = no gate; skipped when there are fewer than 2 * neighbours. */
+  double disparity_gate = 4.0;
+  int neighbours = 12;
   double min_depth = 0.05;        //!< m; matches triangulated nearer are dropped
   double max_depth = 5.0;         //!< m; farther ones too (tiny disparity: useless depth)
 };

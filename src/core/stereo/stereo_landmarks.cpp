@@ -2,6 +2,7 @@
 #include "skin3d/stereo/stereo_landmarks.h"
 
 #include <Eigen/LU>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -43,6 +44,33 @@ double estimateLocalisationSigma(const std::vector<StereoMatch>& matches) {
   return 1.4826 * *mid / std::sqrt(2.0);
 }
 
+namespace {
+// Matches whose disparity disagrees with the plane through their neighbours' disparities.
+std::vector<bool> disparityOutliers(const std::vector<StereoMatch>& m, int k, double gate, double sigma) {
+  std::vector<bool> out(m.size(), false);
+  if (gate <= 0.0 || k < 3 || static_cast<int>(m.size()) < 2 * k) return out;
+  std::vector<std::pair<double, size_t>> nb(m.size());
+  Eigen::MatrixXd A(k, 3);
+  Eigen::VectorXd b(k);
+  std::vector<double> res(k);
+  for (size_t i = 0; i < m.size(); ++i) {
+    for (size_t j = 0; j < m.size(); ++j) nb[j] = {(m[j].left - m[i].left).squaredNorm(), j};
+    std::partial_sort(nb.begin(), nb.begin() + k + 1, nb.end());  // nb[0] is i itself
+    for (int q = 0; q < k; ++q) {
+      const StereoMatch& n = m[nb[q + 1].second];
+      A.row(q) << 1.0, n.left.x() - m[i].left.x(), n.left.y() - m[i].left.y();
+      b[q] = n.left.x() - n.right.x();
+    }
+    const Eigen::Vector3d c = A.colPivHouseholderQr().solve(b);
+    for (int q = 0; q < k; ++q) res[q] = std::abs(b[q] - A.row(q).dot(c));
+    std::nth_element(res.begin(), res.begin() + k / 2, res.end());
+    const double spread = std::max(1.4826 * res[k / 2], std::sqrt(2.0) * sigma);
+    out[i] = std::abs(m[i].left.x() - m[i].right.x() - c[0]) > gate * spread;
+  }
+  return out;
+}
+}  // namespace
+
 std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                                const std::vector<StereoMatch>& matches,
                                                const TriangulateOptions& options, int* dropped, double* sigma_used) {
@@ -83,8 +111,11 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
   std::vector<StereoLandmark> out;
   out.reserve(matches.size());
   int n_dropped = 0;
-  for (const auto& m : matches) {
-    if (std::abs(m.left.y() - m.right.y() - median_dv) > max_dv) {
+  const std::vector<bool> inconsistent =
+      disparityOutliers(matches, options.neighbours, options.disparity_gate, sigma);
+  for (size_t i = 0; i < matches.size(); ++i) {
+    const StereoMatch& m = matches[i];
+    if (inconsistent[i] || std::abs(m.left.y() - m.right.y() - median_dv) > max_dv) {
       ++n_dropped;
       continue;
     }

@@ -6,6 +6,10 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
+#include <skin3d/Landmark.h>
+
+#include <Eigen/Core>
+#include <vector>
 
 #include <string>
 
@@ -24,6 +28,24 @@ inline geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
   for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
   return c;
+}
+
+/** @brief One landmark message: position (m), row-major 3x3 covariance (m^2), descriptor, strength, pixels. */
+inline skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eigen::Matrix3d& covariance,
+                                      const std::vector<float>& descriptor, float strength,
+                                      const Eigen::Vector2d& uv_left, const Eigen::Vector2d& uv_right) {
+  skin3d::Landmark m;
+  m.position.x = position.x();
+  m.position.y = position.y();
+  m.position.z = position.z();
+  for (int i = 0; i < 9; ++i) m.covariance[i] = covariance(i / 3, i % 3);
+  m.descriptor = descriptor;
+  m.strength = strength;
+  m.u_left = uv_left.x();
+  m.v_left = uv_left.y();
+  m.u_right = uv_right.x();
+  m.v_right = uv_right.y();
+  return m;
 }
 
 /** @brief Empty when the camera_info is usable for rectification, else what is wrong with it. */

@@ -111,20 +111,9 @@ class StereoTriangulateNodelet : public nodelet::Nodelet {
     skin3d::LandmarkArray out;
     out.header = matches->header;
     out.landmarks.reserve(lms.size());
-    for (const auto& l : lms) {
-      skin3d::Landmark m;
-      m.position.x = l.position.x();
-      m.position.y = l.position.y();
-      m.position.z = l.position.z();
-      for (int i = 0; i < 9; ++i) m.covariance[i] = l.covariance(i / 3, i % 3);
-      m.descriptor = l.descriptor;
-      m.strength = l.strength;
-      m.u_left = l.uv_left.x();  // rectified pixels
-      m.v_left = l.uv_left.y();
-      m.u_right = l.uv_right.x();
-      m.v_right = l.uv_right.y();
-      out.landmarks.push_back(std::move(m));
-    }
+    for (const auto& l : lms)  // pixels: rectified
+      out.landmarks.push_back(
+          ros_conv::toLandmarkMsg(l.position, l.covariance, l.descriptor, l.strength, l.uv_left, l.uv_right));
     pub_landmarks_.publish(out);
     if (pub_points_.getNumSubscribers() > 0) pub_points_.publish(cloud(out));
   }

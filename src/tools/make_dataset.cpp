@@ -26,6 +26,7 @@
 #include <sstream>
 #include <string>
 
+#include "conversions.h"  // src/nodelets
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
 #include "skin3d/sim/globe.h"
@@ -254,20 +255,9 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
       skin3d::LandmarkArray msg;
       msg.header.frame_id = kLeftFrame;
       msg.header.stamp = stamp;
-      for (const auto& m : s.measure(k)) {
-        skin3d::Landmark l;
-        l.position.x = m.position.x();
-        l.position.y = m.position.y();
-        l.position.z = m.position.z();
-        for (int i = 0; i < 9; ++i) l.covariance[i] = m.covariance(i / 3, i % 3);
-        l.descriptor = m.descriptor;
-        l.strength = m.strength;
-        l.u_left = m.uv_left.x();
-        l.v_left = m.uv_left.y();
-        l.u_right = m.uv_right.x();
-        l.v_right = m.uv_right.y();
-        msg.landmarks.push_back(l);
-      }
+      for (const auto& m : s.measure(k))  // pixels: raw (noisy, before triangulation)
+        msg.landmarks.push_back(
+            ros_conv::toLandmarkMsg(m.position, m.covariance, m.descriptor, m.strength, m.uv_left, m.uv_right));
       total_landmarks += msg.landmarks.size();
       min_lm = std::min<int>(min_lm, msg.landmarks.size());
       max_lm = std::max<int>(max_lm, msg.landmarks.size());

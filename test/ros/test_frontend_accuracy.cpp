@@ -20,6 +20,7 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "bag_reading.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/stereo/features.h"
 #include "skin3d/stereo/stereo_landmarks.h"
@@ -34,11 +35,7 @@ std::string tmp(const std::string& name) { return ::testing::TempDir() + "skin3d
 
 template <class M>
 std::vector<M> read(const std::string& bag_path, const std::string& topic) {
-  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-  rosbag::View view(bag, rosbag::TopicQuery(topic));
-  std::vector<M> out;
-  for (const auto& m : view) out.push_back(*m.instantiate<M>());
-  return out;
+  return skin3d::test::readTopic<M>(bag_path, topic);
 }
 
 using skin3d::ros_conv::fromMsg;

@@ -21,6 +21,7 @@
 #include <numeric>
 #include <random>
 
+#include "bag_reading.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/geometry/stereo_rig.h"
@@ -45,11 +46,7 @@ int run(const std::string& args, std::string* output = nullptr) {
 
 template <class M>
 std::vector<M> read(const std::string& bag_path, const std::string& topic) {
-  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-  rosbag::View view(bag, rosbag::TopicQuery(topic));
-  std::vector<M> out;
-  for (const auto& m : view) out.push_back(*m.instantiate<M>());
-  return out;
+  return skin3d::test::readTopic<M>(bag_path, topic);
 }
 
 // All messages of a bag, serialised, keyed by topic.

@@ -145,5 +145,8 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
     std::vector<double> a = e.abs_radial_mm;
     std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
     EXPECT_LT(a[a.size() / 2], 0.5) << stereo::featureTypeName(type);
+    // No gross mismatch survives the gates: 10 mm off the sphere is > 5 px of disparity at 400 mm, more than
+    // 20 predicted sigmas anywhere on the globe.
+    EXPECT_LT(*std::max_element(e.abs_radial_mm.begin(), e.abs_radial_mm.end()), 10.0) << stereo::featureTypeName(type);
   }
 }

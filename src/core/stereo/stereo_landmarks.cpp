@@ -45,27 +45,55 @@ double estimateLocalisationSigma(const std::vector<StereoMatch>& matches) {
 }
 
 namespace {
-// Matches whose disparity disagrees with the plane through their neighbours' disparities.
-std::vector<bool> disparityOutliers(const std::vector<StereoMatch>& m, int k, double gate, double sigma) {
+// Matches whose disparity disagrees with the plane through their neighbours' disparities. The neighbours are
+// taken among the matches not yet rejected, and the test is repeated (up to `passes` times, until nothing
+// changes): a cluster of mismatches contaminates its members' planes and spreads in the first pass and is
+// exposed once its worst members are gone.
+std::vector<bool> disparityOutliers(const std::vector<StereoMatch>& m, int k, double gate, double sigma, int passes = 3) {
   std::vector<bool> out(m.size(), false);
   if (gate <= 0.0 || k < 3 || static_cast<int>(m.size()) < 2 * k) return out;
-  std::vector<std::pair<double, size_t>> nb(m.size());
+  std::vector<std::pair<double, size_t>> nb;
+  nb.reserve(m.size());
   Eigen::MatrixXd A(k, 3);
   Eigen::VectorXd b(k);
   std::vector<double> res(k);
-  for (size_t i = 0; i < m.size(); ++i) {
-    for (size_t j = 0; j < m.size(); ++j) nb[j] = {(m[j].left - m[i].left).squaredNorm(), j};
-    std::partial_sort(nb.begin(), nb.begin() + k + 1, nb.end());  // nb[0] is i itself
-    for (int q = 0; q < k; ++q) {
-      const StereoMatch& n = m[nb[q + 1].second];
-      A.row(q) << 1.0, n.left.x() - m[i].left.x(), n.left.y() - m[i].left.y();
-      b[q] = n.left.x() - n.right.x();
+  std::vector<double> residual(m.size()), spread(m.size());
+  for (int pass = 0; pass < passes; ++pass) {
+    std::vector<bool> next = out;
+    bool changed = false;
+    std::vector<double> spreads;
+    for (size_t i = 0; i < m.size(); ++i) {
+      if (out[i]) continue;
+      nb.clear();
+      for (size_t j = 0; j < m.size(); ++j)
+        if (j != i && !out[j]) nb.emplace_back((m[j].left - m[i].left).squaredNorm(), j);
+      if (static_cast<int>(nb.size()) < 2 * k) return out;
+      std::partial_sort(nb.begin(), nb.begin() + k, nb.end());
+      for (int q = 0; q < k; ++q) {
+        const StereoMatch& n = m[nb[q].second];
+        A.row(q) << 1.0, n.left.x() - m[i].left.x(), n.left.y() - m[i].left.y();
+        b[q] = n.left.x() - n.right.x();
+      }
+      const Eigen::Vector3d c = A.colPivHouseholderQr().solve(b);
+      for (int q = 0; q < k; ++q) res[q] = std::abs(b[q] - A.row(q).dot(c));
+      std::nth_element(res.begin(), res.begin() + k / 2, res.end());
+      residual[i] = std::abs(m[i].left.x() - m[i].right.x() - c[0]);
+      spread[i] = 1.4826 * res[k / 2];
+      spreads.push_back(spread[i]);
     }
-    const Eigen::Vector3d c = A.colPivHouseholderQr().solve(b);
-    for (int q = 0; q < k; ++q) res[q] = std::abs(b[q] - A.row(q).dot(c));
-    std::nth_element(res.begin(), res.begin() + k / 2, res.end());
-    const double spread = std::max(1.4826 * res[k / 2], std::sqrt(2.0) * sigma);
-    out[i] = std::abs(m[i].left.x() - m[i].right.x() - c[0]) > gate * spread;
+    // A neighbourhood far more scattered than the frame's typical one is itself contaminated by mismatches:
+    // its spread is capped at 3 x the median local spread of the frame.
+    std::nth_element(spreads.begin(), spreads.begin() + spreads.size() / 2, spreads.end());
+    const double cap = 3.0 * spreads[spreads.size() / 2];
+    for (size_t i = 0; i < m.size(); ++i) {
+      if (out[i]) continue;
+      if (residual[i] > gate * std::max(std::min(spread[i], cap), std::sqrt(2.0) * sigma)) {
+        next[i] = true;
+        changed = true;
+      }
+    }
+    out.swap(next);
+    if (!changed) break;
   }
   return out;
 }

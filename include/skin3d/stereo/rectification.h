@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <stdexcept>
+#include <opencv2/core.hpp>
 #include <vector>
 
 #include "skin3d/geometry/camera.h"
@@ -47,6 +48,24 @@ bool fitRectifiedProjection(RectifiedPair* p, const std::vector<Eigen::Vector3d>
  */
 RectifiedPair rectifyStereo(const geometry::StereoRig& rig, const std::vector<Eigen::Vector3d>& points_of_interest = {},
                             double margin_px = 2.0);
+
+/**
+ * @brief Rectification of one camera's raw images from its CameraInfo (K, D, R, P): the undistort-rectify
+ * maps are built once (fixed-point CV_16SC2), then each image is remapped with bilinear interpolation.
+ * @throws std::invalid_argument if the CameraInfo has no size or a zero focal length.
+ */
+class Rectifier {
+ public:
+  explicit Rectifier(const geometry::CameraInfo& info);
+  /** @brief The rectified image (same size and type as the raw one, which must match the CameraInfo size). */
+  cv::Mat operator()(const cv::Mat& raw) const;
+  int width() const { return width_; }
+  int height() const { return height_; }
+
+ private:
+  cv::Mat map1_, map2_;
+  int width_ = 0, height_ = 0;
+};
 
 /** @brief Rectified pixel of a left-frame point in the left (right = false) or right rectified image. */
 Eigen::Vector2d projectRectified(const RectifiedPair& pair, const Eigen::Vector3d& X_left, bool right);

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/core/eigen.hpp>
 #include <sstream>
 
@@ -126,6 +127,29 @@ RectifiedPair rectifyStereo(const geometry::StereoRig& rig, const std::vector<Ei
      << " points of interest inside both rectified images (flags 0); the working area is not seen by both "
         "cameras, or the output size is too small";
   throw std::runtime_error(os.str());
+}
+
+Rectifier::Rectifier(const geometry::CameraInfo& c) : width_(c.width), height_(c.height) {
+  if (c.width <= 0 || c.height <= 0) throw std::invalid_argument("rectifier: camera_info has no image size");
+  if (!(c.K(0, 0) > 0.0) || !(c.P(0, 0) > 0.0))
+    throw std::invalid_argument("rectifier: camera_info is not calibrated (K[0] or P[0] is 0)");
+  cv::Mat K, R, P;
+  const Eigen::Matrix3d P3 = c.P.leftCols<3>();
+  cv::eigen2cv(c.K, K);
+  cv::eigen2cv(c.R, R);
+  cv::eigen2cv(P3, P);
+  cv::initUndistortRectifyMap(K, cv::Mat(c.D), R, P, cv::Size(c.width, c.height), CV_16SC2, map1_, map2_);
+}
+
+cv::Mat Rectifier::operator()(const cv::Mat& raw) const {
+  if (raw.cols != width_ || raw.rows != height_) {
+    std::ostringstream os;
+    os << "rectifier: image is " << raw.cols << "x" << raw.rows << " but camera_info says " << width_ << "x" << height_;
+    throw std::invalid_argument(os.str());
+  }
+  cv::Mat out;
+  cv::remap(raw, out, map1_, map2_, cv::INTER_LINEAR);
+  return out;
 }
 
 }  // namespace stereo

@@ -1,0 +1,169 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// SLAM parameters by name (see slam_config.h).
+#include "skin3d/slam/slam_config.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <functional>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+namespace skin3d {
+namespace slam {
+
+namespace {
+struct Field {
+  std::function<std::string(const SlamOptions&)> get;
+  std::function<void(SlamOptions*, const std::string&)> set;
+};
+
+double toDouble(const std::string& key, const std::string& v) {
+  std::istringstream is(v);
+  double d;
+  if (!(is >> d) || !(is >> std::ws).eof())
+    throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not a number");
+  return d;
+}
+int toInt(const std::string& key, const std::string& v) {
+  const double d = toDouble(key, v);
+  if (d != static_cast<int>(d)) throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not an integer");
+  return static_cast<int>(d);
+}
+bool toBool(const std::string& key, const std::string& v) {
+  if (v == "true" || v == "True" || v == "1") return true;
+  if (v == "false" || v == "False" || v == "0") return false;
+  throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not true/false");
+}
+std::string num(double d) {
+  std::ostringstream os;
+  os.precision(17);
+  os << d;
+  return os.str();
+}
+
+#define SKIN3D_DOUBLE(key, member) \
+  {key, {[](const SlamOptions& o) { return num(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = toDouble(key, v); }}}
+#define SKIN3D_INT(key, member) \
+  {key, {[](const SlamOptions& o) { return num(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = toInt(key, v); }}}
+#define SKIN3D_BOOL(key, member)                                                    \
+  {key, {[](const SlamOptions& o) { return std::string(o.member ? "true" : "false"); }, \
+         [](SlamOptions* o, const std::string& v) { o->member = toBool(key, v); }}}
+
+template <class E>
+Field enumField(const char* key, E SlamOptions::*, std::vector<std::pair<std::string, E>> names,
+                std::function<E&(SlamOptions*)> ref, std::function<E(const SlamOptions&)> val) {
+  return {[names, val](const SlamOptions& o) {
+            for (const auto& n : names)
+              if (n.second == val(o)) return n.first;
+            return std::string("?");
+          },
+          [names, ref, key](SlamOptions* o, const std::string& v) {
+            std::string known;
+            for (const auto& n : names) {
+              if (n.first == v) {
+                ref(o) = n.second;
+                return;
+              }
+              known += (known.empty() ? "" : ", ") + n.first;
+            }
+            throw std::invalid_argument(std::string("slam parameter '") + key + "': '" + v + "' is not one of " + known);
+          }};
+}
+
+const std::vector<std::pair<std::string, Field>>& table() {
+  static const std::vector<std::pair<std::string, Field>> t = {
+      SKIN3D_BOOL("use_gyro", use_gyro),
+      SKIN3D_DOUBLE("gyro_noise", gyro_noise),
+      SKIN3D_INT("max_updates_per_frame", max_updates_per_frame),
+      SKIN3D_INT("max_new_per_frame", max_new_per_frame),
+      SKIN3D_INT("min_tracked_for_no_new", min_tracked_for_no_new),
+      SKIN3D_DOUBLE("max_depth", max_depth),
+      SKIN3D_DOUBLE("gamma", filter.gamma),
+      SKIN3D_DOUBLE("lambda", filter.lambda),
+      SKIN3D_DOUBLE("velocity_noise", filter.velocity_noise),
+      SKIN3D_DOUBLE("angular_rate_noise", filter.angular_rate_noise),
+      SKIN3D_BOOL("estimate_gyro_bias", filter.estimate_gyro_bias),
+      SKIN3D_DOUBLE("gyro_bias_walk", filter.gyro_bias_walk),
+      SKIN3D_DOUBLE("initial_velocity_std", filter.initial_velocity_std),
+      SKIN3D_DOUBLE("initial_angular_rate_std", filter.initial_angular_rate_std),
+      SKIN3D_DOUBLE("initial_gyro_bias_std", filter.initial_gyro_bias_std),
+      SKIN3D_INT("threads", filter.threads),
+      SKIN3D_INT("pool_initial_capacity", pool.initial_capacity),
+      {"pool_growth", enumField<PoolGrowth>("pool_growth", nullptr,
+                                            {{"add_100", PoolGrowth::ADD_100}, {"grow_50_percent", PoolGrowth::GROW_50_PERCENT}},
+                                            [](SlamOptions* o) -> PoolGrowth& { return o->pool.growth; },
+                                            [](const SlamOptions& o) { return o.pool.growth; })},
+      SKIN3D_INT("pool_max_capacity", pool.max_capacity),
+      {"pool_deletion", enumField<DeletionPolicy>("pool_deletion", nullptr,
+                                                  {{"age", DeletionPolicy::BY_AGE}, {"run_length", DeletionPolicy::BY_RUN_LENGTH}},
+                                                  [](SlamOptions* o) -> DeletionPolicy& { return o->pool.deletion; },
+                                                  [](const SlamOptions& o) { return o.pool.deletion; })},
+      SKIN3D_BOOL("prune_stale", pool.prune_stale),
+      SKIN3D_INT("max_unseen_frames", pool.max_unseen_frames),
+      SKIN3D_INT("min_observations", pool.min_observations),
+      SKIN3D_DOUBLE("max_descriptor_distance", pool.max_descriptor_distance),
+      SKIN3D_DOUBLE("ratio", pool.ratio),
+      SKIN3D_DOUBLE("mahalanobis_gate", pool.mahalanobis_gate),
+      {"fork_policy", enumField<ForkPolicy>("fork_policy", nullptr,
+                                            {{"longest_run", ForkPolicy::LONGEST_RUN}, {"first_seen", ForkPolicy::FIRST_SEEN}},
+                                            [](SlamOptions* o) -> ForkPolicy& { return o->pool.fork; },
+                                            [](const SlamOptions& o) { return o.pool.fork; })},
+  };
+  return t;
+}
+
+const Field& field(const std::string& key) {
+  for (const auto& f : table())
+    if (f.first == key) return f.second;
+  std::string known;
+  for (const auto& f : table()) known += (known.empty() ? "" : ", ") + f.first;
+  throw std::invalid_argument("unknown slam parameter '" + key + "' (known: " + known + ")");
+}
+}  // namespace
+
+const std::vector<std::string>& slamOptionKeys() {
+  static const std::vector<std::string> keys = [] {
+    std::vector<std::string> k;
+    for (const auto& f : table()) k.push_back(f.first);
+    return k;
+  }();
+  return keys;
+}
+
+std::string getSlamOption(const SlamOptions& options, const std::string& key) { return field(key).get(options); }
+
+void setSlamOption(SlamOptions* options, const std::string& key, const std::string& value) {
+  field(key).set(options, value);
+}
+
+SlamOptions loadSlamOptions(const std::string& yaml_path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(yaml_path);
+  } catch (const std::exception& e) {
+    throw std::invalid_argument("cannot read slam parameters from '" + yaml_path + "': " + e.what());
+  }
+  SlamOptions o;
+  if (!root || root.IsNull()) return o;
+  if (!root.IsMap()) throw std::invalid_argument("'" + yaml_path + "': expected a map of slam parameters");
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (!kv.second.IsScalar())
+      throw std::invalid_argument("'" + yaml_path + "': slam parameter '" + key + "' must be a single value");
+    try {
+      setSlamOption(&o, key, kv.second.as<std::string>());
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("'" + yaml_path + "': " + e.what());
+    }
+  }
+  try {
+    o.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument("'" + yaml_path + "': " + e.what());
+  }
+  return o;
+}
+
+}  // namespace slam
+}  // namespace skin3d

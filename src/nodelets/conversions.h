@@ -7,6 +7,7 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
 #include <skin3d/Landmark.h>
+#include <skin3d/LandmarkArray.h>
 
 #include <Eigen/Core>
 #include <vector>
@@ -14,6 +15,7 @@
 #include <string>
 
 #include "skin3d/geometry/camera.h"
+#include "skin3d/slam/slam_system.h"
 
 namespace skin3d {
 namespace ros_conv {
@@ -28,6 +30,21 @@ inline geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
   for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
   return c;
+}
+
+/** @brief The SLAM's measurements of one LandmarkArray (no checks: the SLAM drops bad ones and counts them). */
+inline std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a) {
+  std::vector<slam::Measurement> out;
+  out.reserve(a.landmarks.size());
+  for (const auto& l : a.landmarks) {
+    slam::Measurement m;
+    m.z = Eigen::Vector3d(l.position.x, l.position.y, l.position.z);
+    for (int i = 0; i < 9; ++i) m.C(i / 3, i % 3) = l.covariance[i];
+    m.descriptor = l.descriptor;
+    m.strength = l.strength;
+    out.push_back(std::move(m));
+  }
+  return out;
 }
 
 /** @brief One landmark message: position (m), row-major 3x3 covariance (m^2), descriptor, strength, pixels. */

@@ -3,7 +3,8 @@
  * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--quiet]
  *
  * Generates a simulated dataset (DESIGN.md "Datasets") as a rosbag, deterministically from the seed,
- * without a ROS master, plus FILE.truth.yaml beside it. KIND: globe-landmarks, globe-images, workpiece.
+ * without a ROS master, plus FILE.truth.yaml beside it (and FILE.map.csv, the landmarks with their descriptors, for
+ * globe-landmarks). KIND: globe-landmarks, globe-images, workpiece.
  * Topics: stereo/{left,right}/camera_info, stereo/{left,right}/image_raw (image kinds),
  * stereo/landmarks (landmark kind), imu/data (globe kinds), ground_truth/pose.
  * Exit codes: 0 ok, 1 bad configuration, 2 bad command line, 3 cannot write the output.
@@ -184,10 +185,11 @@ long long fileSize(const std::string& path) {
   return stat(path.c_str(), &st) == 0 ? static_cast<long long>(st.st_size) : -1;
 }
 
-std::string truthPath(const std::string& bag) {
-  const std::string stem = bag.size() > 4 && bag.substr(bag.size() - 4) == ".bag" ? bag.substr(0, bag.size() - 4) : bag;
-  return stem + ".truth.yaml";
+std::string stemOf(const std::string& bag) {
+  return bag.size() > 4 && bag.substr(bag.size() - 4) == ".bag" ? bag.substr(0, bag.size() - 4) : bag;
 }
+std::string truthPath(const std::string& bag) { return stemOf(bag) + ".truth.yaml"; }
+std::string mapPath(const std::string& bag) { return stemOf(bag) + ".map.csv"; }
 
 void writeImu(rosbag::Bag& bag, const sim::GlobeSimulator& s, double t_end) {
   const double var = s.config().gyro_noise * s.config().gyro_noise;
@@ -209,7 +211,8 @@ void writeImu(rosbag::Bag& bag, const sim::GlobeSimulator& s, double t_end) {
 
 // ------------------------------------------------------------------ globe (landmarks and images)
 
-int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet) {
+int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
+              const std::string& map_path) {
   sim::GlobeConfig gc = c.globe;
   gc.seed = c.seed;
   const sim::GlobeSimulator s(gc);
@@ -296,6 +299,20 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
   if (images) emitRealism(truth, c, calib);
   if (!images) {
     truth << YAML::Key << "pixel_sigma_px" << YAML::Value << gc.pixel_sigma;
+    // The known map of thesis experiment 1: every landmark with its (noise-free) descriptor, as CSV.
+    {
+      std::ofstream csv(map_path);
+      csv.precision(9);
+      csv << "# skin3d globe landmarks (world frame, m) with their descriptors: id,x,y,z,d0,...\n";
+      for (size_t i = 0; i < s.landmarksWorld().size(); ++i) {
+        const auto& p = s.landmarksWorld()[i];
+        csv << i << ',' << p.x() << ',' << p.y() << ',' << p.z();
+        for (float d : s.descriptors()[i]) csv << ',' << d;
+        csv << '\n';
+      }
+      if (!csv) throw std::runtime_error("cannot write " + map_path);
+    }
+    truth << YAML::Key << "landmark_map_csv" << YAML::Value << map_path;
     truth << YAML::Key << "landmarks_world_m" << YAML::Value << YAML::BeginSeq;
     for (const auto& p : s.landmarksWorld()) emitVec(truth, p);
     truth << YAML::EndSeq;
@@ -505,7 +522,7 @@ int main(int argc, char** argv) {
     if (c.kind == sim::DatasetKind::Workpiece)
       rc = makeWorkpiece(c, frames, bag, truth, o.quiet);
     else
-      rc = makeGlobe(c, frames, bag, truth, o.quiet);
+      rc = makeGlobe(c, frames, bag, truth, o.quiet, mapPath(o.out));
   } catch (const sim::SimConfigError& e) {
     bag.close();
     std::remove(o.out.c_str());

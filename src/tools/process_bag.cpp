@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
- * process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map TRUTH.yaml]
+ * process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map MAP.csv]
  *             [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--quiet]
  *
  * Runs a recorded or simulated session through the same core code as the nodelets, without a ROS master,
@@ -11,8 +11,8 @@
  * filter state), summary.yaml (with the absolute trajectory error when the bag has ground_truth/pose), and
  * ground_truth.tum.
  *
- * --known-map TRUTH.yaml: thesis experiment 1, the landmark positions are known (the dataset's
- * landmarks_world_m; descriptors are not in the truth file, so association is by position + Mahalanobis gate).
+ * --known-map MAP.csv: thesis experiment 1, the landmarks are known (make_dataset globe-landmarks writes
+ * FILE.map.csv beside the bag: positions and descriptors); association by descriptor + Mahalanobis gate.
  *
  * Exit codes: 0 ok, 1 bad configuration or data, 2 bad command line, 3 cannot write the output.
  */
@@ -23,7 +23,6 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/Imu.h>
 #include <skin3d/LandmarkArray.h>
-#include <sys/stat.h>
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
@@ -31,6 +30,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <string>
 
 #include "conversions.h"  // src/nodelets
@@ -47,13 +47,13 @@ namespace {
 using namespace skin3d;
 
 const char* kUsage =
-    "usage: process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map TRUTH.yaml]\n"
+    "usage: process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map MAP.csv]\n"
     "                   [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--quiet]\n"
     "  --bag        dataset or recorded session (stereo/landmarks, or stereo/*/image_raw + camera_info)\n"
     "  --out        results directory (created)\n"
     "  --config     SLAM parameters (default: the package's config/slam.yaml keys and defaults)\n"
     "  --gyro       fuse imu/data (thesis experiment 3); same as --set use_gyro=true\n"
-    "  --known-map  truth YAML with landmarks_world_m: localisation with known landmarks (experiment 1)\n"
+    "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
     "  --features   front end for image bags (default kaze)\n"
     "  --frames     process at most N frames\n"
     "  --set        override one SLAM parameter (repeatable)\n";
@@ -75,17 +75,31 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   return p;
 }
 
-std::vector<slam::Measurement> fromLandmarkMsg(const skin3d::LandmarkArray& a) {
-  std::vector<slam::Measurement> out;
-  out.reserve(a.landmarks.size());
-  for (const auto& l : a.landmarks) {
-    slam::Measurement m;
-    m.z = Eigen::Vector3d(l.position.x, l.position.y, l.position.z);
-    for (int i = 0; i < 9; ++i) m.C(i / 3, i % 3) = l.covariance[i];
-    m.descriptor = l.descriptor;
-    m.strength = l.strength;
-    out.push_back(std::move(m));
+// The known map of experiment 1: make_dataset's FILE.map.csv (id,x,y,z,d0,... per line; '#' comments).
+std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> readKnownMap(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::invalid_argument("cannot read the known map '" + path + "'");
+  std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> out;
+  std::string line;
+  int n = 0;
+  while (std::getline(f, line)) {
+    ++n;
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<double> v;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) {
+      try {
+        v.push_back(std::stod(cell));
+      } catch (const std::exception&) {
+        throw std::invalid_argument("'" + path + "' line " + std::to_string(n) + ": '" + cell + "' is not a number");
+      }
+    }
+    if (v.size() < 4) throw std::invalid_argument("'" + path + "' line " + std::to_string(n) + ": need id,x,y,z[,descriptor]");
+    out.first.emplace_back(v[1], v[2], v[3]);
+    out.second.emplace_back(v.begin() + 4, v.end());
   }
+  if (out.first.empty()) throw std::invalid_argument("the known map '" + path + "' has no landmarks");
   return out;
 }
 
@@ -115,12 +129,8 @@ int run(const Args& a) {
   slam::SlamSystem slam(opt);
 
   if (!a.known_map.empty()) {
-    const YAML::Node t = YAML::LoadFile(a.known_map);
-    if (!t["landmarks_world_m"])
-      throw std::invalid_argument("'" + a.known_map + "' has no landmarks_world_m (a globe-landmarks truth file?)");
-    std::vector<Eigen::Vector3d> pos;
-    for (const auto& p : t["landmarks_world_m"]) pos.emplace_back(p[0].as<double>(), p[1].as<double>(), p[2].as<double>());
-    slam.setKnownMap(pos, std::vector<std::vector<float>>(pos.size()));
+    const auto known = readKnownMap(a.known_map);
+    slam.setKnownMap(known.first, known.second);
   }
 
   rosbag::Bag bag;
@@ -181,7 +191,7 @@ int run(const Args& a) {
                    Eigen::Vector3d(imu->angular_velocity.x, imu->angular_velocity.y, imu->angular_velocity.z), C);
     } else if (topic == "stereo/landmarks") {
       const auto l = mi.instantiate<skin3d::LandmarkArray>();
-      frame(secs(l->header.stamp), fromLandmarkMsg(*l));
+      frame(secs(l->header.stamp), ros_conv::fromMsg(*l));
     } else if (topic == "stereo/left/camera_info" && !have_l) {
       info_l = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
       rect_l = std::make_unique<stereo::Rectifier>(info_l);
@@ -211,55 +221,21 @@ int run(const Args& a) {
   if (frames == 0) throw std::invalid_argument("no frames in '" + a.bag + "' (no stereo/landmarks or image pairs)");
 
   // ---- results
-  mkdir(a.out.c_str(), 0755);
-  struct stat st;
-  if (stat(a.out.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) throw std::runtime_error("cannot create '" + a.out + "'");
-  slam::writeTum(a.out + "/trajectory.tum", trajectory);
-  const auto map = slam.map();
-  slam::writePly(a.out + "/map.ply", map);
-  slam::writeStateCsv(a.out + "/state.csv", rows);
-  if (!truth.empty()) slam::writeTum(a.out + "/ground_truth.tum", truth);
-  YAML::Emitter y;
-  y << YAML::BeginMap;
-  y << YAML::Key << "bag" << YAML::Value << a.bag << YAML::Key << "frames" << YAML::Value << frames;
-  y << YAML::Key << "frames_dropped" << YAML::Value << bad_frames;
-  y << YAML::Key << "gyro" << YAML::Value << opt.use_gyro << YAML::Key << "known_map" << YAML::Value
-    << !a.known_map.empty();
-  y << YAML::Key << "landmarks_in_map" << YAML::Value << map.size();
-  y << YAML::Key << "landmarks_ever_seen" << YAML::Value << static_cast<long>(slam.pool().everSeen());
-  y << YAML::Key << "slam_ms_per_frame" << YAML::Value << 1e3 * frame_seconds / frames;
-  y << YAML::Key << "wall_time_s" << YAML::Value
-    << std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-  y << YAML::Key << "final_covariance_trace" << YAML::Value << YAML::BeginMap << YAML::Key << "rig" << YAML::Value
-    << rows.back().trace_rig << YAML::Key << "landmarks_m2" << YAML::Value << rows.back().trace_landmarks
-    << YAML::Key << "all" << YAML::Value << rows.back().trace_all << YAML::EndMap;
-  y << YAML::Key << "corr_vx_wy_final" << YAML::Value << rows.back().corr_vx_wy;
-  if (!truth.empty()) {
-    const slam::TrajectoryError e = slam::trajectoryError(trajectory, truth);
-    y << YAML::Key << "ate" << YAML::Value << YAML::BeginMap << YAML::Key << "pairs" << YAML::Value << e.pairs
-      << YAML::Key << "rmse_mm" << YAML::Value << 1e3 * e.rmse << YAML::Key << "mean_mm" << YAML::Value
-      << 1e3 * e.mean << YAML::Key << "max_mm" << YAML::Value << 1e3 * e.max << YAML::Key << "final_mm"
-      << YAML::Value << 1e3 * e.final << YAML::Key << "rotation_rmse_mrad" << YAML::Value << 1e3 * e.rotation_rmse
-      << YAML::Key << "alignment" << YAML::Value << "none (both worlds are the first camera frame)" << YAML::EndMap;
-  }
-  if (map.size() >= 4 && a.known_map.empty()) {
-    std::vector<Eigen::Vector3d> pts;
-    for (const auto& m : map) pts.push_back(m.position);
-    try {
-      const geometry::SphereFit fit = geometry::fitSphere(pts);
-      slam::writeSphereFit(a.out + "/sphere_fit.yaml", fit);
-      y << YAML::Key << "sphere_fit" << YAML::Value << YAML::BeginMap << YAML::Key << "radius_mm" << YAML::Value
-        << 1e3 * fit.radius << YAML::Key << "rms_residual_mm" << YAML::Value << 1e3 * fit.rms_inliers << YAML::Key
-        << "inliers" << YAML::Value << fit.inliers << YAML::EndMap;
-    } catch (const std::invalid_argument& e) {
-      std::fprintf(stderr, "process_bag: no sphere fit: %s\n", e.what());
-    }
-  }
-  y << YAML::EndMap;
-  std::ofstream s(a.out + "/summary.yaml");
-  s << "# skin3d process_bag summary (mm where the key says so)\n" << y.c_str() << '\n';
-  if (!s) throw std::runtime_error("cannot write '" + a.out + "/summary.yaml'");
-  if (!a.quiet) std::cout << y.c_str() << std::endl;
+  slam::RunRecord rec;
+  rec.trajectory = trajectory;
+  rec.rows = rows;
+  rec.map = slam.map();
+  rec.ground_truth = truth;
+  rec.fit_sphere = a.known_map.empty();
+  rec.info = {{"bag", a.bag},
+              {"frames_dropped", std::to_string(bad_frames)},
+              {"gyro", opt.use_gyro ? "true" : "false"},
+              {"known_map", a.known_map.empty() ? "false" : "true"},
+              {"front_end", have_l ? a.features : "none (landmark bag)"},
+              {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
+              {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
+  const std::string text = slam::writeResults(a.out, rec);
+  if (!a.quiet) std::cout << text << std::flush;
   return 0;
 }
 

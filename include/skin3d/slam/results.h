@@ -61,6 +61,24 @@ void writePly(const std::string& path, const std::vector<MapPoint>& map);
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows);
 /** @brief sphere_fit.yaml: centre (m), radius and residuals (mm), inliers. */
 void writeSphereFit(const std::string& path, const geometry::SphereFit& fit);
+/** @brief Everything a run leaves behind (what writeResults writes). */
+struct RunRecord {
+  std::vector<StampedPose> trajectory;        //!< one pose per processed frame
+  std::vector<StateRow> rows;                 //!< one row per processed frame
+  std::vector<MapPoint> map;                  //!< final map (world)
+  std::vector<StampedPose> ground_truth;      //!< optional (datasets): ATE and ground_truth.tum
+  bool fit_sphere = true;                     //!< robust sphere fit of the map -> sphere_fit.yaml
+  std::vector<std::pair<std::string, std::string>> info;  //!< extra summary lines (key, value as text)
+};
+
+/**
+ * @brief Writes the results directory (created if missing): trajectory.tum, map.ply, state.csv,
+ * ground_truth.tum (if any), sphere_fit.yaml (if fit_sphere and the fit succeeds) and summary.yaml
+ * (frames, map size, final covariance traces, v_x-omega_y correlation, ATE, sphere fit; mm where the key says).
+ * @return the summary text. @throws std::runtime_error naming the path when something cannot be written.
+ */
+std::string writeResults(const std::string& dir, const RunRecord& run);
+
 /** @brief Reads a TUM trajectory (t x y z qx qy qz qw per line, '#' comments). @throws std::runtime_error. */
 std::vector<StampedPose> readTum(const std::string& path);
 

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
+#include <sys/stat.h>
 
 namespace skin3d {
 namespace slam {
@@ -146,6 +147,56 @@ void writeSphereFit(const std::string& path, const geometry::SphereFit& fit) {
   auto f = open(path);
   f << "# skin3d robust sphere fit of the SLAM map\n" << y.c_str() << '\n';
   close(f, path);
+}
+
+std::string writeResults(const std::string& dir, const RunRecord& run) {
+  ::mkdir(dir.c_str(), 0755);
+  struct stat st;
+  if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) throw std::runtime_error("cannot create directory '" + dir + "'");
+  writeTum(dir + "/trajectory.tum", run.trajectory);
+  writePly(dir + "/map.ply", run.map);
+  writeStateCsv(dir + "/state.csv", run.rows);
+  if (!run.ground_truth.empty()) writeTum(dir + "/ground_truth.tum", run.ground_truth);
+  YAML::Emitter y;
+  y << YAML::BeginMap;
+  for (const auto& kv : run.info) y << YAML::Key << kv.first << YAML::Value << kv.second;
+  y << YAML::Key << "frames" << YAML::Value << run.trajectory.size();
+  y << YAML::Key << "landmarks_in_map" << YAML::Value << run.map.size();
+  if (!run.rows.empty()) {
+    const StateRow& r = run.rows.back();
+    y << YAML::Key << "landmarks_ever_seen" << YAML::Value << r.ever_seen;
+    y << YAML::Key << "final_covariance_trace" << YAML::Value << YAML::BeginMap << YAML::Key << "rig" << YAML::Value
+      << r.trace_rig << YAML::Key << "landmarks_m2" << YAML::Value << r.trace_landmarks << YAML::Key << "all"
+      << YAML::Value << r.trace_all << YAML::EndMap;
+    y << YAML::Key << "corr_vx_wy_final" << YAML::Value << r.corr_vx_wy;
+  }
+  if (!run.ground_truth.empty()) {
+    const TrajectoryError e = trajectoryError(run.trajectory, run.ground_truth);
+    y << YAML::Key << "ate" << YAML::Value << YAML::BeginMap << YAML::Key << "pairs" << YAML::Value << e.pairs
+      << YAML::Key << "rmse_mm" << YAML::Value << 1e3 * e.rmse << YAML::Key << "mean_mm" << YAML::Value << 1e3 * e.mean
+      << YAML::Key << "max_mm" << YAML::Value << 1e3 * e.max << YAML::Key << "final_mm" << YAML::Value << 1e3 * e.final
+      << YAML::Key << "rotation_rmse_mrad" << YAML::Value << 1e3 * e.rotation_rmse << YAML::Key << "alignment"
+      << YAML::Value << "none (both worlds are the first camera frame)" << YAML::EndMap;
+  }
+  if (run.fit_sphere && run.map.size() >= 4) {
+    std::vector<Eigen::Vector3d> pts;
+    for (const auto& m : run.map) pts.push_back(m.position);
+    try {
+      const geometry::SphereFit fit = geometry::fitSphere(pts);
+      writeSphereFit(dir + "/sphere_fit.yaml", fit);
+      y << YAML::Key << "sphere_fit" << YAML::Value << YAML::BeginMap << YAML::Key << "radius_mm" << YAML::Value
+        << 1e3 * fit.radius << YAML::Key << "rms_residual_mm" << YAML::Value << 1e3 * fit.rms_inliers << YAML::Key
+        << "inliers" << YAML::Value << fit.inliers << YAML::EndMap;
+    } catch (const std::invalid_argument& e) {
+      y << YAML::Key << "sphere_fit" << YAML::Value << (std::string("failed: ") + e.what());
+    }
+  }
+  y << YAML::EndMap;
+  const std::string text = std::string("# skin3d SLAM run summary (mm where the key says so)\n") + y.c_str() + "\n";
+  auto f = open(dir + "/summary.yaml");
+  f << text;
+  close(f, dir + "/summary.yaml");
+  return text;
 }
 
 }  // namespace slam

@@ -218,7 +218,13 @@ FrameStats SlamSystem::knownMapFrame(double, const std::vector<Measurement>& mea
   // within the Mahalanobis gate, then the closest descriptor.
   const RigState& x = filter_.state();
   const Eigen::Matrix3d Rt = x.q.toRotationMatrix().transpose();
-  const double cell = 0.01;
+  // Grid cell = the search radius: 3 sigma of the predicted pose error at the largest depth plus 1 cm.
+  double max_depth_seen = 0.0;
+  for (const auto& m : meas) max_depth_seen = std::max(max_depth_seen, m.z.norm());
+  const Eigen::Matrix<double, 6, 6> Pp = filter_.poseCovariance();
+  const double sp = std::sqrt(std::max(0.0, Pp.topLeftCorner<3, 3>().trace()));
+  const double st = std::sqrt(std::max(0.0, Pp.bottomRightCorner<3, 3>().trace()));
+  const double cell = std::max(0.01, 3.0 * (sp + st * max_depth_seen) + 0.01);
   auto key = [cell](const Eigen::Vector3d& p) {
     const auto i = static_cast<std::int64_t>(std::floor(p.x() / cell)) & 0x1FFFFF;
     const auto j = static_cast<std::int64_t>(std::floor(p.y() / cell)) & 0x1FFFFF;

@@ -1,0 +1,106 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Regression runs of the thesis' SLAM experiments 1-3 (Table 7.1) on a reduced landmark-level globe: the real
+// tools end to end (make_dataset -> process_bag), checked against the generator's ground truth.
+//
+// Reduced dataset: the globe turns 4x faster (0.6 rad/s), so one full loop takes 105 frames instead of 420 (the
+// full-size experiments run in scripts/demo; their figures are in the README and the issue notes). Bounds
+// are the issue's full-loop targets loosened for 4x fewer observations of each landmark (errors ~ 1/sqrt(n):
+// 2x) plus margin, and the orderings the issue asks for (exp. 3 better than exp. 2).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+const std::string kMake = SKIN3D_MAKE_DATASET_BIN;
+const std::string kProcess = SKIN3D_PROCESS_BAG_BIN;
+const std::string kConfig = std::string(SKIN3D_SOURCE_DIR) + "/config/slam_globe.yaml";
+
+std::string tmp(const std::string& name) { return ::testing::TempDir() + "skin3d_slam_exp_" + name; }
+
+int run(const std::string& cmd) {
+  const int rc = std::system((cmd + " > " + tmp("log.txt") + " 2>&1").c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+struct Trace {
+  std::vector<double> rig, position_std;
+};
+
+Trace readTrace(const std::string& csv) {
+  std::ifstream f(csv);
+  std::string line;
+  std::getline(f, line);  // header: t,...,trace_rig (col 7),...,position_std_m (col 10)
+  Trace t;
+  while (std::getline(f, line)) {
+    std::stringstream ss(line);
+    std::string cell;
+    std::vector<double> v;
+    while (std::getline(ss, cell, ',')) v.push_back(std::stod(cell));
+    t.rig.push_back(v.at(7));
+    t.position_std.push_back(v.at(10));
+  }
+  return t;
+}
+
+class SlamExperiments : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    std::ofstream(tmp("fast.yaml")) << "globe: {rate_rad_s: 0.6, frames: 105}\n";
+    ASSERT_EQ(run(kMake + " globe-landmarks --quiet --config " + tmp("fast.yaml") + " --out " + tmp("globe.bag")), 0);
+  }
+  static YAML::Node process(const std::string& name, const std::string& extra) {
+    const std::string out = tmp(name);
+    EXPECT_EQ(run(kProcess + " --bag " + tmp("globe.bag") + " --out " + out + " --config " + kConfig + " --quiet " + extra), 0)
+        << name;
+    return YAML::LoadFile(out + "/summary.yaml");
+  }
+};
+
+TEST_F(SlamExperiments, OneKnownLandmarks) {
+  const YAML::Node s = process("exp1", "--known-map " + tmp("globe.map.csv"));
+  const double ate = s["ate"]["rmse_mm"].as<double>();
+  std::printf("experiment 1 (known landmarks): ATE %.3f mm over %d frames\n", ate, s["ate"]["pairs"].as<int>());
+  EXPECT_EQ(s["ate"]["pairs"].as<int>(), 105);
+  // ~200 landmarks of sigma ~0.3-1 mm each fix the pose to well below a millimetre.
+  EXPECT_LT(ate, 1.0);
+}
+
+TEST_F(SlamExperiments, TwoAndThreeSlamWithoutAndWithGyro) {
+  const YAML::Node e2 = process("exp2", "");
+  const YAML::Node e3 = process("exp3", "--gyro");
+  for (const auto* e : {&e2, &e3}) {
+    const YAML::Node& s = *e;
+    const bool gyro = s["gyro"].as<std::string>() == "true";
+    const double r = s["sphere_fit"]["radius_mm"].as<double>(), rms = s["sphere_fit"]["rms_residual_mm"].as<double>();
+    const double ate = s["ate"]["rmse_mm"].as<double>();
+    std::printf("experiment %d: radius %.4f mm (error %.4f), RMS %.4f mm, ATE %.3f mm, final trace %.3e, "
+                "corr(v_x, w_y) %.3f\n",
+                gyro ? 3 : 2, r, r - 200.0, rms, ate, s["final_covariance_trace"]["all"].as<double>(),
+                s["corr_vx_wy_final"].as<double>());
+    EXPECT_NEAR(r, 200.0, 0.1) << "full loop target 0.03 mm";
+    EXPECT_LT(rms, 0.3);
+    EXPECT_LT(ate, 5.0) << "full loop target 1 mm";
+    // The loop closes (landmarks of the first frames seen again): the trace of the rig-state covariance (what
+    // the thesis plots, Fig. 7.2) and the position uncertainty drop by at least 20 % from their peak in the
+    // second half of the loop. (The trace of the whole state is dominated by the landmarks.)
+    const Trace t = readTrace(tmp(gyro ? "exp3" : "exp2") + "/state.csv");
+    ASSERT_EQ(t.rig.size(), 105u);
+    const double peak = *std::max_element(t.rig.begin() + 50, t.rig.begin() + 90);
+    const double peak_std = *std::max_element(t.position_std.begin() + 50, t.position_std.begin() + 90);
+    EXPECT_LT(t.rig.back(), 0.8 * peak) << "no loop-closure drop of the covariance trace";
+    EXPECT_LT(t.position_std.back(), 0.8 * peak_std) << "no loop-closure drop of the position uncertainty";
+  }
+  // The gyroscope helps: smaller trajectory error and smaller final uncertainty.
+  EXPECT_LT(e3["ate"]["rmse_mm"].as<double>(), e2["ate"]["rmse_mm"].as<double>());
+  EXPECT_LT(e3["final_covariance_trace"]["all"].as<double>(), e2["final_covariance_trace"]["all"].as<double>());
+}
+
+}  // namespace

@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -51,7 +52,7 @@ const char* kUsage =
     "                   [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--quiet]\n"
     "  --bag        dataset or recorded session (stereo/landmarks, or stereo/*/image_raw + camera_info)\n"
     "  --out        results directory (created)\n"
-    "  --config     SLAM parameters (default: the package's config/slam.yaml keys and defaults)\n"
+    "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win)\n"
     "  --gyro       fuse imu/data (thesis experiment 3); same as --set use_gyro=true\n"
     "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
     "  --features   front end for image bags (default kaze)\n"
@@ -59,7 +60,8 @@ const char* kUsage =
     "  --set        override one SLAM parameter (repeatable)\n";
 
 struct Args {
-  std::string bag, out, config, known_map, features = "kaze";
+  std::string bag, out, known_map, features = "kaze";
+  std::vector<std::string> configs;
   std::vector<std::pair<std::string, std::string>> sets;
   bool gyro = false, quiet = false;
   int frames = -1;
@@ -122,7 +124,8 @@ class Progress {
 };
 
 int run(const Args& a) {
-  slam::SlamOptions opt = a.config.empty() ? slam::SlamOptions() : slam::loadSlamOptions(a.config);
+  slam::SlamOptions opt;
+  for (const auto& c : a.configs) slam::applySlamOptions(&opt, c);
   if (a.gyro) opt.use_gyro = true;
   for (const auto& kv : a.sets) slam::setSlamOption(&opt, kv.first, kv.second);
   opt.validate();
@@ -150,7 +153,7 @@ int run(const Args& a) {
   std::unique_ptr<stereo::Rectifier> rect_l, rect_r;
   geometry::CameraInfo info_l, info_r;
   bool have_l = false, have_r = false;
-  sensor_msgs::Image::ConstPtr img_l;
+  std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l, pending_r;
   stereo::FeatureOptions fo;
   fo.type = stereo::parseFeatureType(a.features);
   const stereo::TriangulateOptions to;
@@ -200,22 +203,35 @@ int run(const Args& a) {
       info_r = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
       rect_r = std::make_unique<stereo::Rectifier>(info_r);
       have_r = true;
-    } else if (topic == "stereo/left/image_raw") {
-      img_l = mi.instantiate<sensor_msgs::Image>();
-    } else if (topic == "stereo/right/image_raw") {
-      const auto img_r = mi.instantiate<sensor_msgs::Image>();
-      if (!img_l || img_l->header.stamp != img_r->header.stamp || !have_l || !have_r) continue;
+    } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
+      // Pair left and right by stamp (a bag may store either first).
+      const auto img = mi.instantiate<sensor_msgs::Image>();
+      auto& mine = topic == "stereo/left/image_raw" ? pending_l : pending_r;
+      auto& other = topic == "stereo/left/image_raw" ? pending_r : pending_l;
+      const auto it = other.find(img->header.stamp);
+      if (it == other.end()) {
+        mine[img->header.stamp] = img;
+        continue;
+      }
+      const sensor_msgs::Image::ConstPtr left = topic == "stereo/left/image_raw" ? img : it->second;
+      const sensor_msgs::Image::ConstPtr right = topic == "stereo/left/image_raw" ? it->second : img;
+      other.erase(other.begin(), std::next(it));  // older unpaired images will never be paired
+      if (!have_l || !have_r) continue;
       if (!matcher) {
         fo.disparity_offset = info_l.P(0, 2) - info_r.P(0, 2);
         matcher = std::make_unique<stereo::StereoFeatureMatcher>(fo);
       }
-      const cv::Mat L = (*rect_l)(ros_conv::toMono8(*img_l));
-      const cv::Mat R = (*rect_r)(ros_conv::toMono8(*img_r));
-      const auto lms = stereo::triangulateMatches(info_l, info_r, matcher->process(L, R), to);
-      std::vector<slam::Measurement> m;
-      for (const auto& l : lms) m.push_back({l.position, l.covariance, l.descriptor, l.strength});
-      frame(secs(img_r->header.stamp), m);
-      img_l.reset();
+      try {
+        const cv::Mat L = (*rect_l)(ros_conv::toMono8(*left));
+        const cv::Mat R = (*rect_r)(ros_conv::toMono8(*right));
+        const auto lms = stereo::triangulateMatches(info_l, info_r, matcher->process(L, R), to);
+        std::vector<slam::Measurement> m;
+        for (const auto& l : lms) m.push_back({l.position, l.covariance, l.descriptor, l.strength});
+        frame(secs(left->header.stamp), m);
+      } catch (const std::exception& e) {
+        ++bad_frames;
+        std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(left->header.stamp), e.what());
+      }
     }
   }
   if (frames == 0) throw std::invalid_argument("no frames in '" + a.bag + "' (no stereo/landmarks or image pairs)");
@@ -254,7 +270,7 @@ int main(int argc, char** argv) {
     };
     if (k == "--bag") a.bag = value();
     else if (k == "--out") a.out = value();
-    else if (k == "--config") a.config = value();
+    else if (k == "--config") a.configs.push_back(value());
     else if (k == "--known-map") a.known_map = value();
     else if (k == "--features") a.features = value();
     else if (k == "--frames") a.frames = std::atoi(value().c_str());

@@ -30,5 +30,8 @@ void setSlamOption(SlamOptions* options, const std::string& key, const std::stri
  *  @throws std::invalid_argument naming the file and key (unknown key, bad value, unreadable file). */
 SlamOptions loadSlamOptions(const std::string& yaml_path);
 
+/** @brief Like loadSlamOptions, but over the given options (files can be layered: later keys win). Not validated. */
+void applySlamOptions(SlamOptions* options, const std::string& yaml_path);
+
 }  // namespace slam
 }  // namespace skin3d

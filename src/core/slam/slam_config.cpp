@@ -137,26 +137,30 @@ void setSlamOption(SlamOptions* options, const std::string& key, const std::stri
   field(key).set(options, value);
 }
 
-SlamOptions loadSlamOptions(const std::string& yaml_path) {
+void applySlamOptions(SlamOptions* o, const std::string& yaml_path) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(yaml_path);
   } catch (const std::exception& e) {
     throw std::invalid_argument("cannot read slam parameters from '" + yaml_path + "': " + e.what());
   }
-  SlamOptions o;
-  if (!root || root.IsNull()) return o;
+  if (!root || root.IsNull()) return;
   if (!root.IsMap()) throw std::invalid_argument("'" + yaml_path + "': expected a map of slam parameters");
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (!kv.second.IsScalar())
       throw std::invalid_argument("'" + yaml_path + "': slam parameter '" + key + "' must be a single value");
     try {
-      setSlamOption(&o, key, kv.second.as<std::string>());
+      setSlamOption(o, key, kv.second.as<std::string>());
     } catch (const std::invalid_argument& e) {
       throw std::invalid_argument("'" + yaml_path + "': " + e.what());
     }
   }
+}
+
+SlamOptions loadSlamOptions(const std::string& yaml_path) {
+  SlamOptions o;
+  applySlamOptions(&o, yaml_path);
   try {
     o.validate();
   } catch (const std::invalid_argument& e) {

@@ -12,8 +12,8 @@
  *    where O_W is O with every row block whitened, L_k^T H_k Phi_k (W_k = L_k L_k^T, Cholesky).
  *    G is the Fisher information of x_0 (noise-free dynamics), G^-1 its Cramer-Rao bound.
  *    The analysis works on O_W (never on G, which would square the condition number): a compact
- *    n x n triangular factor R with R^T R = G is accumulated by sequential Householder QR, and its SVD
- *    gives sigma_i(O_W) = sqrt(eig_i(G)) and the right singular vectors.
+ *    n x n factor R with R^T R = G is accumulated by sequential (column-pivoted Householder) QR, and
+ *    its one-sided Jacobi SVD gives sigma_i(O_W) = sqrt(eig_i(G)) and the right singular vectors.
  *    Numerical rank: the number of sigma_i > relative_tolerance * sigma_max (default 1e-9). Rank is
  *    invariant to the (non-singular) weighting and to the state units; the tolerance and the singular
  *    values are not: they are in whitened-measurement units per state unit (SI: m, rad, m/s, rad/s).
@@ -95,7 +95,7 @@ struct ObservabilityReport {
   Eigen::VectorXd singular_values;  //!< all n, descending (zeros appended if the matrix has < n rows)
   /** n x c: right singular vectors of the c smallest sigma, smallest first (column i belongs to
    *  singular_values(n - 1 - i)); the first deficiency() columns are an orthonormal basis of the
-   *  numerically unobservable subspace. */
+   *  numerically unobservable subspace. Sign: the largest-magnitude component is positive. */
   Eigen::MatrixXd weakest;
   int deficiency() const { return dim - rank; }
   bool fullRank() const { return rank == dim; }
@@ -110,8 +110,9 @@ Eigen::MatrixXd observabilityMatrix(const LinearizedSystem& sys, bool weighted =
 /** @brief The Gramian sum_k Phi_k^T H_k^T W_k H_k Phi_k (W_k = I when sys.W is empty) over the first
  *  `steps` steps (all if < 0). */
 Eigen::MatrixXd observabilityGramian(const LinearizedSystem& sys, int steps = -1);
-/** @brief Upper-triangular n x n factor R, R^T R = observabilityGramian(sys, steps), accumulated by
- *  sequential QR of the whitened rows (memory O(n^2), never forms the stacked matrix). */
+/** @brief An n x n factor R, R^T R = observabilityGramian(sys, steps) (upper triangular up to a column
+ *  permutation), accumulated by sequential QR of the whitened rows: memory O(n^2), the stacked matrix is
+ *  never formed; it has the singular values and right singular vectors of the whitened O. */
 Eigen::MatrixXd observabilityFactor(const LinearizedSystem& sys, int steps = -1);
 
 /** @brief Rank and SVD analysis of any matrix M (m x n, m may be < n): the observability matrix, its
@@ -133,7 +134,9 @@ struct RestrictedObservability {
   Eigen::VectorXd singular_values;  //!< of the projected kept columns, descending
   Eigen::MatrixXd directions;       //!< their right singular vectors (|kept| square, same order)
   Eigen::MatrixXd information;      //!< marginal information (|kept| square): the projected Gramian
-  int rank = 0;                     //!< numerical rank of the projected columns (same tolerance)
+  /** Numerical rank of the projected columns: sigma_i > relative_tolerance x the largest singular value
+   *  of the kept columns before the projection. */
+  int rank = 0;
   /** Inverse of `information` (Cramer-Rao bound) and its correlation matrix, when rank == |kept|;
    *  empty otherwise. */
   Eigen::MatrixXd covariance, correlation;

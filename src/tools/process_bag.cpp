@@ -204,19 +204,23 @@ int run(const Args& a) {
       rect_r = std::make_unique<stereo::Rectifier>(info_r);
       have_r = true;
     } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
-      // Pair left and right by stamp (a bag may store either first).
+      // Pair left and right by stamp (a bag may store either first, and the camera_info after the images).
       const auto img = mi.instantiate<sensor_msgs::Image>();
-      auto& mine = topic == "stereo/left/image_raw" ? pending_l : pending_r;
-      auto& other = topic == "stereo/left/image_raw" ? pending_r : pending_l;
-      const auto it = other.find(img->header.stamp);
-      if (it == other.end()) {
-        mine[img->header.stamp] = img;
+      (topic == "stereo/left/image_raw" ? pending_l : pending_r)[img->header.stamp] = img;
+    }
+    // Process the complete pairs in stamp order once both camera_infos are known.
+    while (have_l && have_r && !pending_l.empty() && !pending_r.empty()) {
+      const ros::Time t = std::max(pending_l.begin()->first, pending_r.begin()->first);
+      const auto li = pending_l.find(t), ri = pending_r.find(t);
+      if (li == pending_l.end() || ri == pending_r.end()) {
+        // The older one has no partner: drop it.
+        (pending_l.begin()->first < t ? pending_l : pending_r).erase((pending_l.begin()->first < t ? pending_l : pending_r).begin());
         continue;
       }
-      const sensor_msgs::Image::ConstPtr left = topic == "stereo/left/image_raw" ? img : it->second;
-      const sensor_msgs::Image::ConstPtr right = topic == "stereo/left/image_raw" ? it->second : img;
-      other.erase(other.begin(), std::next(it));  // older unpaired images will never be paired
-      if (!have_l || !have_r) continue;
+      const sensor_msgs::Image::ConstPtr left = li->second, right = ri->second;
+      pending_l.erase(pending_l.begin(), std::next(li));
+      pending_r.erase(pending_r.begin(), std::next(ri));
+      if (a.frames >= 0 && frames >= a.frames) break;
       if (!matcher) {
         fo.disparity_offset = info_l.P(0, 2) - info_r.P(0, 2);
         matcher = std::make_unique<stereo::StereoFeatureMatcher>(fo);

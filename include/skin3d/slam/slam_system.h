@@ -13,6 +13,7 @@
  *  3. Association (LandmarkPool): descriptor distance plus the Mahalanobis gate of the innovation (the gate
  *     is the filter's d^2 = y^T S^-1 y; landmarks predicted behind the camera or farther than max_depth are
  *     not candidates). Fork duplicates are deleted.
+ *  3b. Consensus: the associations must agree on one rigid motion (RANSAC, see SlamOptions::consensus_*).
  *  4. Update with at most max_updates_per_frame associated measurements (strongest first; a stacked
  *     batch, Joseph form). Every associated measurement counts for the pool's run lengths.
  *  5. Initialisation: the strongest unassociated measurements (at most max_new_per_frame) become new
@@ -54,6 +55,13 @@ struct SlamOptions {
    *  Keeps the pool from churning when the view is well covered. */
   int min_tracked_for_no_new = 0;
   double max_depth = 5.0;           //!< m; landmarks predicted farther are not association candidates
+  /** Consensus check of the associations (RANSAC of the rigid motion from 3 point pairs, world landmark vs
+   *  measured point): associations inconsistent with the best motion (squared Mahalanobis distance above
+   *  consensus_gate, chi2 3 dof) are rejected before the update. Individually gated wrong associations can
+   *  each explain a different pose error; together they are not consistent. 0 iterations = off. */
+  int consensus_iterations = 100;
+  double consensus_gate = 16.27;    //!< chi2 3 dof, 99.9 %
+  std::uint64_t consensus_seed = 1; //!< RANSAC's random sequence (deterministic runs)
   /** @throws std::invalid_argument naming the bad field (also validates filter and pool options). */
   void validate() const;
 };
@@ -75,6 +83,7 @@ struct FrameStats {
   int used = 0;                 //!< of those, used in the update
   int initialised = 0;          //!< new landmarks
   int forks_deleted = 0;        //!< duplicate landmarks deleted (forking)
+  int rejected_consensus = 0;   //!< associations rejected by the rigid-motion consensus (RANSAC)
   int pruned = 0;               //!< landmarks deleted by the pool (stale / evicted)
   int gyro_used = 0, gyro_dropped = 0;
   double nis = 0.0;             //!< NIS of the stacked update
@@ -127,6 +136,7 @@ class SlamSystem {
   void predictTo(double t, FrameStats* stats);
   void applyChanges(const PoolChanges& changes, FrameStats* stats);
   FrameStats knownMapFrame(double time, const std::vector<Measurement>& m, FrameStats stats);
+  std::vector<bool> consensus(const std::vector<Association>& matches, const std::vector<Measurement>& meas) const;
 
   SlamOptions opt_;
   Eskf filter_;

@@ -79,6 +79,8 @@ const std::vector<std::pair<std::string, Field>>& table() {
       SKIN3D_INT("max_new_per_frame", max_new_per_frame),
       SKIN3D_INT("min_tracked_for_no_new", min_tracked_for_no_new),
       SKIN3D_DOUBLE("max_depth", max_depth),
+      SKIN3D_INT("consensus_iterations", consensus_iterations),
+      SKIN3D_DOUBLE("consensus_gate", consensus_gate),
       SKIN3D_DOUBLE("gamma", filter.gamma),
       SKIN3D_DOUBLE("lambda", filter.lambda),
       SKIN3D_DOUBLE("velocity_noise", filter.velocity_noise),

@@ -3,6 +3,7 @@
 #include "skin3d/slam/slam_system.h"
 
 #include <Eigen/Cholesky>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -46,6 +47,8 @@ void SlamOptions::validate() const {
   if (max_new_per_frame < 0) bad("max_new_per_frame (>= 0)", max_new_per_frame);
   if (min_tracked_for_no_new < 0) bad("min_tracked_for_no_new (>= 0)", min_tracked_for_no_new);
   if (!(max_depth > 0.0)) bad("max_depth (> 0)", max_depth);
+  if (consensus_iterations < 0) bad("consensus_iterations (>= 0)", consensus_iterations);
+  if (!(consensus_gate > 0.0)) bad("consensus_gate (> 0)", consensus_gate);
 }
 
 SlamSystem::SlamSystem(const SlamOptions& options)
@@ -175,6 +178,30 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
   };
   AssociationResult a = meas.empty() ? AssociationResult() : pool_.associate(descs, gate);
   stats.associated = static_cast<int>(a.matches.size());
+  if (opt_.consensus_iterations > 0 && a.matches.size() >= 4) {
+    const std::vector<bool> ok = consensus(a.matches, meas);
+    std::vector<Association> kept;
+    for (size_t i = 0; i < a.matches.size(); ++i) {
+      if (ok[i]) {
+        kept.push_back(a.matches[i]);
+      } else {
+        a.unassociated.push_back(a.matches[i].measurement);
+        ++stats.rejected_consensus;
+      }
+    }
+    // A fork duplicate only counts if its measurement's association survived.
+    std::vector<int> dup;
+    for (const auto& f : a.forks) {
+      const bool survived = std::any_of(kept.begin(), kept.end(), [&](const Association& k) { return k.measurement == f.measurement; });
+      if (survived) dup.push_back(f.slot);
+    }
+    std::sort(dup.begin(), dup.end());
+    dup.erase(std::unique(dup.begin(), dup.end()), dup.end());
+    a.duplicate_slots = dup;
+    a.matches.swap(kept);
+    std::sort(a.unassociated.begin(), a.unassociated.end());
+    stats.associated = static_cast<int>(a.matches.size());
+  }
 
   // Update with the strongest associated measurements.
   std::vector<Association> use = a.matches;
@@ -211,6 +238,90 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
     }
   }
   return stats;
+}
+
+std::vector<bool> SlamSystem::consensus(const std::vector<Association>& matches,
+                                        const std::vector<Measurement>& meas) const {
+  // Rigid motion world <- camera from 3 pairs (Kabsch), inliers by the Mahalanobis distance of
+  // R z + t - m under C_m + R C_z R^T; the hypothesis with most inliers wins (ties: smaller sum of d^2).
+  const size_t n = matches.size();
+  std::vector<Eigen::Vector3d> m(n), z(n);
+  std::vector<Eigen::Matrix3d> Cm(n), Cz(n);
+  for (size_t i = 0; i < n; ++i) {
+    m[i] = filter_.landmark(matches[i].slot);
+    Cm[i] = filter_.landmarkCovariance(matches[i].slot);
+    z[i] = meas[matches[i].measurement].z;
+    Cz[i] = meas[matches[i].measurement].C;
+  }
+  auto inliers = [&](const Eigen::Matrix3d& R, const Eigen::Vector3d& t, std::vector<bool>* in, double* cost) {
+    int count = 0;
+    *cost = 0.0;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d e = R * z[i] + t - m[i];
+      const Eigen::Matrix3d S = Cm[i] + R * Cz[i] * R.transpose();
+      const double d2 = e.dot(S.ldlt().solve(e));
+      const bool ok = d2 <= opt_.consensus_gate;
+      (*in)[i] = ok;
+      count += ok;
+      *cost += std::min(d2, opt_.consensus_gate);
+    }
+    return count;
+  };
+  auto kabsch = [&](const std::vector<size_t>& idx, Eigen::Matrix3d* R, Eigen::Vector3d* t) {
+    Eigen::Vector3d cz = Eigen::Vector3d::Zero(), cm = Eigen::Vector3d::Zero();
+    for (size_t i : idx) cz += z[i], cm += m[i];
+    cz /= idx.size();
+    cm /= idx.size();
+    Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+    for (size_t i : idx) H += (z[i] - cz) * (m[i] - cm).transpose();
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    *R = svd.matrixV() * D * svd.matrixU().transpose();
+    *t = cm - *R * cz;
+  };
+  // The current estimate is the first hypothesis (usually right: then the sampling only has to beat it).
+  const RigState& x = filter_.state();
+  std::vector<bool> best(n), cur(n);
+  double best_cost = 0.0, cost = 0.0;
+  int best_count = inliers(x.q.toRotationMatrix(), x.p, &best, &best_cost);
+  std::uint64_t state = opt_.consensus_seed * 6364136223846793005ull + 1442695040888963407ull;
+  auto next = [&state](size_t k) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<size_t>((state >> 33) % k);
+  };
+  for (int it = 0; it < opt_.consensus_iterations && best_count < static_cast<int>(n); ++it) {
+    std::vector<size_t> idx = {next(n), next(n), next(n)};
+    if (idx[0] == idx[1] || idx[0] == idx[2] || idx[1] == idx[2]) continue;
+    // Degenerate (nearly collinear) samples give no rotation.
+    if ((z[idx[1]] - z[idx[0]]).cross(z[idx[2]] - z[idx[0]]).norm() < 1e-6) continue;
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    kabsch(idx, &R, &t);
+    const int c = inliers(R, t, &cur, &cost);
+    if (c > best_count || (c == best_count && cost < best_cost)) {
+      // Refit on the consensus set, then keep whichever labelling is better.
+      std::vector<size_t> all;
+      for (size_t i = 0; i < n; ++i)
+        if (cur[i]) all.push_back(i);
+      if (all.size() >= 3) {
+        Eigen::Matrix3d R2;
+        Eigen::Vector3d t2;
+        kabsch(all, &R2, &t2);
+        std::vector<bool> cur2(n);
+        double cost2 = 0.0;
+        const int c2 = inliers(R2, t2, &cur2, &cost2);
+        if (c2 > c || (c2 == c && cost2 < cost)) {
+          cur.swap(cur2);
+          cost = cost2;
+        }
+      }
+      best_count = static_cast<int>(std::count(cur.begin(), cur.end(), true));
+      best.swap(cur);
+      best_cost = cost;
+    }
+  }
+  return best;
 }
 
 FrameStats SlamSystem::knownMapFrame(double, const std::vector<Measurement>& meas, FrameStats stats) {

@@ -13,7 +13,8 @@
  * Parameters: every SLAM key of config/slam.yaml (same names, same defaults, private namespace); ~world_frame
  *             (world), ~camera_frame (stereo_left_optical_frame: the frame the landmarks must come in),
  *             ~results (directory written on shutdown; empty = none), ~fit_sphere (true: sphere_fit.yaml),
- *             ~map_every (10 frames), ~reset_on_jump_back (1.0 s: a stamp this much older than the last frame is a
+ *             ~known_map (make_dataset's FILE.map.csv: localisation in a known map, thesis experiment 1; empty =
+ *             SLAM), ~map_every (10 frames), ~reset_on_jump_back (1.0 s: a stamp this much older than the last frame is a
  *             restarted bag: reset with a warning; smaller steps back are dropped frames), ~queue_size (10).
  * Bad input never stops the node: NaN/Inf or non-positive-definite landmark covariances and points behind the
  * camera are dropped (counted, throttled warning); out-of-order or repeated stamps drop the frame; a frame with
@@ -97,6 +98,18 @@ class EskfSlamNodelet : public nodelet::Nodelet {
     int queue = 10;
     pnh.param("queue_size", queue, 10);
     slam_ = std::make_unique<slam::SlamSystem>(opt);
+    std::string known_map;
+    pnh.param<std::string>("known_map", known_map, "");
+    if (!known_map.empty()) {
+      try {
+        const auto km = slam::readLandmarkMap(known_map);
+        slam_->setKnownMap(km.first, km.second);
+        NODELET_INFO("eskf_slam: localisation in the known map '%s' (%zu landmarks): thesis experiment 1",
+                     known_map.c_str(), km.first.size());
+      } catch (const std::exception& e) {
+        NODELET_ERROR("eskf_slam: ~known_map: %s; running SLAM instead", e.what());
+      }
+    }
 
     pub_odom_ = nh.advertise<nav_msgs::Odometry>("slam/odometry", 10);
     pub_path_ = nh.advertise<nav_msgs::Path>("slam/path", 2, true);

@@ -77,34 +77,6 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   return p;
 }
 
-// The known map of experiment 1: make_dataset's FILE.map.csv (id,x,y,z,d0,... per line; '#' comments).
-std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> readKnownMap(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::invalid_argument("cannot read the known map '" + path + "'");
-  std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> out;
-  std::string line;
-  int n = 0;
-  while (std::getline(f, line)) {
-    ++n;
-    if (line.empty() || line[0] == '#') continue;
-    std::vector<double> v;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) {
-      try {
-        v.push_back(std::stod(cell));
-      } catch (const std::exception&) {
-        throw std::invalid_argument("'" + path + "' line " + std::to_string(n) + ": '" + cell + "' is not a number");
-      }
-    }
-    if (v.size() < 4) throw std::invalid_argument("'" + path + "' line " + std::to_string(n) + ": need id,x,y,z[,descriptor]");
-    out.first.emplace_back(v[1], v[2], v[3]);
-    out.second.emplace_back(v.begin() + 4, v.end());
-  }
-  if (out.first.empty()) throw std::invalid_argument("the known map '" + path + "' has no landmarks");
-  return out;
-}
-
 class Progress {
  public:
   Progress(bool quiet) : quiet_(quiet), t0_(std::chrono::steady_clock::now()) {}
@@ -132,7 +104,7 @@ int run(const Args& a) {
   slam::SlamSystem slam(opt);
 
   if (!a.known_map.empty()) {
-    const auto known = readKnownMap(a.known_map);
+    const auto known = slam::readLandmarkMap(a.known_map);
     slam.setKnownMap(known.first, known.second);
   }
 

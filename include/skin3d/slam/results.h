@@ -79,6 +79,11 @@ struct RunRecord {
  */
 std::string writeResults(const std::string& dir, const RunRecord& run);
 
+/** @brief A known landmark map (thesis experiment 1): make_dataset's FILE.map.csv, one landmark per line
+ *  `id,x,y,z,d0,d1,...` (world frame, m; descriptor optional), '#' comments.
+ *  @throws std::invalid_argument naming the file and line. */
+std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> readLandmarkMap(const std::string& path);
+
 /** @brief Reads a TUM trajectory (t x y z qx qy qz qw per line, '#' comments). @throws std::runtime_error. */
 std::vector<StampedPose> readTum(const std::string& path);
 

@@ -2,6 +2,8 @@
 // Error-state EKF SLAM (see include/skin3d/slam/eskf.h for the model, the Jacobians and the costs).
 #include "skin3d/slam/eskf.h"
 
+#include "../common/text.h"
+
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <array>
@@ -27,12 +29,7 @@ bool allFinite(const Eigen::MatrixBase<Derived>& m) {
 
 [[noreturn]] void fail(const std::string& message) { throw std::invalid_argument(message); }
 
-std::string str(double v) {
-  std::ostringstream os;
-  os.precision(17);
-  os << v;
-  return os.str();
-}
+std::string str(double v) { return common::num(v); }
 
 // z and C of a measurement: z finite, C finite, symmetric and positive definite (LLT).
 void checkMeasurement(const Eigen::Vector3d& z, const Eigen::Matrix3d& C, const std::string& who) {

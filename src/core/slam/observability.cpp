@@ -4,6 +4,8 @@
 // ROS-free; uses only the filter (slam/eskf.h) and the SO(3) helpers, never skin3d/sim.
 #include "skin3d/slam/observability.h"
 
+#include "../common/text.h"
+
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -24,12 +26,7 @@ namespace {
 
 [[noreturn]] void fail(const std::string& message) { throw std::invalid_argument(message); }
 
-std::string str(double v) {
-  std::ostringstream os;
-  os.precision(17);
-  os << v;
-  return os.str();
-}
+std::string str(double v) { return common::num(v); }
 
 std::string shape(const Eigen::MatrixXd& M) {
   return std::to_string(M.rows()) + "x" + std::to_string(M.cols());

@@ -55,6 +55,7 @@ struct Stats {
   std::vector<int> per_frame;
   std::vector<double> abs_radial_mm;
   std::vector<double> z2_normal;  // squared radial error / predicted radial variance
+  std::vector<double> nees;       // 3D: truth = the true sphere point on the left keypoint's ray
   double rms_radial_mm = 0.0;
 };
 
@@ -94,6 +95,17 @@ Stats evaluate(const std::string& bag, const std::string& truth_path, stereo::Fe
       s.z2_normal.push_back(e * e / n.dot(l.covariance * n));
       s.abs_radial_mm.push_back(1e3 * std::abs(e));
       sum_sq += e * e;
+      // The 3D truth of a landmark: where the ray of its (rectified) left pixel meets the true sphere, as a
+      // ground-truth depth map is used. Its lateral part differs from the MMSE estimate by half the left-right
+      // localisation difference, which is what the predicted covariance says of the lateral error too.
+      const Eigen::Vector3d ray =
+          (L.R.transpose() * Eigen::Vector3d((l.uv_left.x() - L.P(0, 2)) / L.P(0, 0), (l.uv_left.y() - L.P(1, 2)) / L.P(1, 1), 1.0))
+              .normalized();
+      const double bq = ray.dot(-centre), disc = bq * bq - (centre.squaredNorm() - radius * radius);
+      if (disc > 0.0) {
+        const Eigen::Vector3d err = l.position - (-bq - std::sqrt(disc)) * ray;
+        s.nees.push_back(err.dot(l.covariance.ldlt().solve(err)));
+      }
     }
   }
   s.rms_radial_mm = 1e3 * std::sqrt(sum_sq / std::max<size_t>(1, s.z2_normal.size()));
@@ -114,6 +126,12 @@ void report(const char* name, const Stats& s) {
   std::sort(a.begin(), a.end());
   const size_t inliers = std::lower_bound(z.begin(), z.end(), 10.83) - z.begin();  // chi2(1) 99.9 %
   const double inlier_mean = std::accumulate(z.begin(), z.begin() + inliers, 0.0) / std::max<size_t>(1, inliers);
+  std::vector<double> q = s.nees;
+  std::sort(q.begin(), q.end());
+  const double nees_mean = std::accumulate(q.begin(), q.end(), 0.0) / std::max<size_t>(1, q.size());
+  const double nees_tail = 100.0 * (q.end() - std::lower_bound(q.begin(), q.end(), 16.27)) / std::max<size_t>(1, q.size());
+  std::printf("%s: 3D NEES mean %.3f (chi2(3): 3), median %.3f (2.366), %.1f %% beyond 16.27 (0.1 %%)\n", name, nees_mean,
+              q.empty() ? 0.0 : q[q.size() / 2], nees_tail);
   std::printf("%s: landmarks/frame min %d median %d max %d; |radial error| median %.3f mm, 90%% %.3f mm, RMS %.1f mm; "
               "z2 = (radial error)^2 / predicted variance: median %.3f (chi2(1): 0.455), %.1f %% beyond 10.83 "
               "(chi2(1): 0.1 %%), mean of the rest %.3f (chi2(1) truncated: 0.99); %zu landmarks\n",
@@ -124,8 +142,8 @@ void report(const char* name, const Stats& s) {
 }  // namespace
 
 // Prints the figures of merit (see the issue notes) and checks what the front end does guarantee today:
-// enough landmarks for SLAM, and sub-millimetre depth with an exact calibration. The covariance-consistency
-// bar (chi2) is NOT asserted: the error distribution is heavy-tailed (mismatches at the limb), see the report.
+// enough landmarks for SLAM, sub-millimetre depth with an exact calibration, no gross mismatch, and covariances
+// consistent on average within the bounds stated below (the strict chi2 bar is not met: heavy tail).
 TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
   const std::string bag = tmp("globe.bag");
   ASSERT_EQ(run("globe-images --quiet --frames 6 --out " + bag), 0);
@@ -148,5 +166,16 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
     // No gross mismatch survives the gates: 10 mm off the sphere is > 5 px of disparity at 400 mm, more than
     // 20 predicted sigmas anywhere on the globe.
     EXPECT_LT(*std::max_element(e.abs_radial_mm.begin(), e.abs_radial_mm.end()), 10.0) << stereo::featureTypeName(type);
+    // Covariance consistency (issue 4 bar, NOT fully met: see the issue notes). A consistent covariance gives a
+    // 3D NEES averaging 3 with 0.1 % beyond the chi2(3) 99.9 % point 16.27. The front end's errors are
+    // heavy-tailed (oblique surface, large keypoints), so we guard what holds today: the average within 3 / 1.5
+    // .. 3 x 1.5 and at most 5 % beyond 16.27 (without the slant-dependent noise model: mean 6.3, 8.8 %).
+    std::vector<double> q = e.nees;
+    ASSERT_GT(q.size(), 1000u);
+    const double mean = std::accumulate(q.begin(), q.end(), 0.0) / q.size();
+    const double tail = static_cast<double>(std::count_if(q.begin(), q.end(), [](double v) { return v > 16.27; })) / q.size();
+    EXPECT_GT(mean, 2.0) << stereo::featureTypeName(type);
+    EXPECT_LT(mean, 4.5) << stereo::featureTypeName(type);
+    EXPECT_LT(tail, 0.05) << stereo::featureTypeName(type);
   }
 }

@@ -4,7 +4,8 @@
  *
  * The rectified cameras come from the two CameraInfo's P (left: P_l = [K_l | 0], right: P_r = [K_r | p4],
  * both in the rectified-left frame); the point is triangulated there with the core's MMSE triangulation
- * (geometry/triangulation.h, isotropic pixel noise sigma) and rotated back to the raw left optical frame
+ * (geometry/triangulation.h; pixel noise sigma, horizontally inflated with the surface slant, see
+ * TriangulateOptions::slant_noise) and rotated back to the raw left optical frame
  * with R_left^T (CameraInfo R = rectified <- raw), covariance C = R^T C_rect R.
  *
  * SPDX-License-Identifier: BSD-3-Clause
@@ -43,6 +44,13 @@ struct TriangulateOptions {
    *  surface has a locally smooth disparity). 0 = no gate; skipped when there are fewer than 2 * neighbours. */
   double disparity_gate = 4.0;
   int neighbours = 12;
+  /** Slant-dependent disparity noise. A feature on a surface slanted by theta from the viewing direction is
+   *  foreshortened differently in the two images and its horizontal localisation error grows with tan(theta).
+   *  The slant of each match is measured from the local disparity gradient of its neighbours' plane,
+   *  tan(theta) ~ |grad d| f / d; the model var(u) = sigma^2 + (b / 2) tan^2(theta) (per image, horizontal; the
+   *  vertical stays sigma^2) has b fitted per frame to the plane residuals (robust, binned by slant). true:
+   *  on (needs > 2 neighbours and >= 50 matches; otherwise the isotropic sigma). */
+  bool slant_noise = true;
   double min_depth = 0.05;        //!< m; matches triangulated nearer are dropped
   double max_depth = 5.0;         //!< m; farther ones too (tiny disparity: useless depth)
 };

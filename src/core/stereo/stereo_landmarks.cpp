@@ -97,6 +97,69 @@ std::vector<bool> disparityOutliers(const std::vector<StereoMatch>& m, int k, do
   }
   return out;
 }
+
+// Per kept match: the residual of its disparity against a quadratic surface through its k nearest kept
+// neighbours' disparities (left image: a plane would leave the surface's curvature in the residuals), and that
+// surface's disparity gradient at the match (px per px).
+void localPlanes(const std::vector<StereoMatch>& m, const std::vector<size_t>& kept, int k, std::vector<double>* residual,
+                 std::vector<Eigen::Vector2d>* gradient) {
+  const size_t n = kept.size();
+  residual->assign(n, 0.0);
+  gradient->assign(n, Eigen::Vector2d::Zero());
+  std::vector<std::pair<double, size_t>> nb(n);
+  Eigen::MatrixXd A(k, 6);
+  Eigen::VectorXd b(k);
+  for (size_t ii = 0; ii < n; ++ii) {
+    const StereoMatch& mi = m[kept[ii]];
+    for (size_t jj = 0; jj < n; ++jj) nb[jj] = {(m[kept[jj]].left - mi.left).squaredNorm(), jj};
+    std::partial_sort(nb.begin(), nb.begin() + k + 1, nb.end());  // nb[0] is ii itself
+    const double scale = std::sqrt(std::max(1.0, nb[k].first));  // conditioning of the quadratic terms
+    for (int q = 0; q < k; ++q) {
+      const StereoMatch& o = m[kept[nb[q + 1].second]];
+      const double x = (o.left.x() - mi.left.x()) / scale, y = (o.left.y() - mi.left.y()) / scale;
+      A.row(q) << 1.0, x, y, x * x, x * y, y * y;
+      b[q] = o.left.x() - o.right.x();
+    }
+    const Eigen::VectorXd c = A.colPivHouseholderQr().solve(b);
+    (*residual)[ii] = mi.left.x() - mi.right.x() - c[0];
+    (*gradient)[ii] = Eigen::Vector2d(c[1], c[2]) / scale;
+  }
+}
+
+// Disparity variance model var_d(t) = a + b t^2 (t = tan of the surface slant) fitted robustly to the plane
+// residuals: the matches are split into 5 bins by t^2, each bin's variance is estimated as
+// median(r^2) / 0.455 (the chi2(1) median) / (1 + h) with h = 6 / k (the quadratic's own prediction variance
+// at the centre of k neighbours), and a line is fitted through the bins weighted by their counts. Returns false
+// when there are too few matches (fewer than 10 per bin).
+bool fitSlantNoise(const std::vector<double>& residual, const std::vector<double>& t2, int k, double* a, double* b) {
+  const size_t n = residual.size();
+  if (n < 50) return false;
+  std::vector<size_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t l, size_t r) { return t2[l] < t2[r]; });
+  const int bins = 5;
+  const double h = 6.0 / k;
+  Eigen::Matrix2d N = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d g = Eigen::Vector2d::Zero();
+  for (int q = 0; q < bins; ++q) {
+    const size_t lo = n * q / bins, hi = n * (q + 1) / bins;
+    std::vector<double> r2, tt;
+    for (size_t i = lo; i < hi; ++i) {
+      r2.push_back(residual[order[i]] * residual[order[i]]);
+      tt.push_back(t2[order[i]]);
+    }
+    std::nth_element(r2.begin(), r2.begin() + r2.size() / 2, r2.end());
+    std::nth_element(tt.begin(), tt.begin() + tt.size() / 2, tt.end());
+    const double y = r2[r2.size() / 2] / 0.4549 / (1.0 + h), x = tt[tt.size() / 2], w = static_cast<double>(hi - lo);
+    N += w * Eigen::Vector2d(1.0, x) * Eigen::RowVector2d(1.0, x);
+    g += w * Eigen::Vector2d(1.0, x) * y;
+  }
+  if (std::abs(N.determinant()) < 1e-12 * N.squaredNorm()) return false;
+  const Eigen::Vector2d c = N.ldlt().solve(g);
+  *a = c[0];
+  *b = std::max(0.0, c[1]);
+  return std::isfinite(*a) && std::isfinite(*b);
+}
 }  // namespace
 
 std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
@@ -123,8 +186,6 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
     sigma = std::isnan(sigma) ? 0.5 : std::min(options.max_sigma_px, std::max(options.min_sigma_px, sigma));
   }
   if (sigma_used) *sigma_used = sigma;
-  const Eigen::Matrix2d cov = sigma * sigma * Eigen::Matrix2d::Identity();
-  views[0].cov_uv = views[1].cov_uv = cov;
   const Eigen::Matrix3d Rt = left.R.transpose();  // raw left <- rectified left
   double median_dv = 0.0;
   if (options.row_gate > 0.0 && !matches.empty()) {
@@ -141,14 +202,37 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
   int n_dropped = 0;
   const std::vector<bool> inconsistent =
       disparityOutliers(matches, options.neighbours, options.disparity_gate, sigma);
+  std::vector<size_t> kept;
   for (size_t i = 0; i < matches.size(); ++i) {
     const StereoMatch& m = matches[i];
-    if (inconsistent[i] || std::abs(m.left.y() - m.right.y() - median_dv) > max_dv) {
+    if (inconsistent[i] || std::abs(m.left.y() - m.right.y() - median_dv) > max_dv)
       ++n_dropped;
-      continue;
+    else
+      kept.push_back(i);
+  }
+  // Slant-dependent disparity noise (see TriangulateOptions::slant_noise).
+  std::vector<double> var_u(kept.size(), sigma * sigma);
+  const int k = options.neighbours;
+  if (options.slant_noise && k >= 3 && kept.size() > static_cast<size_t>(2 * k)) {
+    std::vector<double> res, t2(kept.size());
+    std::vector<Eigen::Vector2d> grad;
+    localPlanes(matches, kept, k, &res, &grad);
+    const double f = left.P(0, 0), offset = left.P(0, 2) - right.P(0, 2);
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      const StereoMatch& m = matches[kept[ii]];
+      const double d = std::max(0.5, m.left.x() - m.right.x() - offset);
+      t2[ii] = std::pow(grad[ii].norm() * f / d, 2);
     }
+    double a = 0.0, b = 0.0;
+    const bool fitted = fitSlantNoise(res, t2, k, &a, &b);
+    if (fitted)
+      for (size_t ii = 0; ii < kept.size(); ++ii) var_u[ii] = sigma * sigma + 0.5 * b * t2[ii];
+  }
+  for (size_t ii = 0; ii < kept.size(); ++ii) {
+    const StereoMatch& m = matches[kept[ii]];
     views[0].uv = m.left;
     views[1].uv = m.right;
+    views[0].cov_uv = views[1].cov_uv = Eigen::Vector2d(var_u[ii], sigma * sigma).asDiagonal();
     const geometry::TriangulationResult r = geometry::triangulateMmse(views);
     if (!r.ok || !(r.X.z() >= options.min_depth) || !(r.X.z() <= options.max_depth)) {
       ++n_dropped;

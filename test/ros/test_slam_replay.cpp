@@ -1,0 +1,62 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// rostest of a thesis experiment through launch/replay_globe.launch (experiment 1, 2 or 3 on a 40-frame
+// landmark bag made at build time): every frame's slam/odometry against the simulator's ground truth.
+// Parameters (private): ~frames (frames in the bag), ~rms_bound_m (bound on the RMS position error).
+#include <gtest/gtest.h>
+#include <nav_msgs/Odometry.h>
+#include <ros/ros.h>
+
+#include <cmath>
+#include <mutex>
+#include <vector>
+
+#include "skin3d/sim/globe.h"
+
+namespace {
+std::mutex m;
+std::vector<nav_msgs::Odometry> odometry;
+void onOdom(const nav_msgs::Odometry::ConstPtr& o) {
+  std::lock_guard<std::mutex> l(m);
+  odometry.push_back(*o);
+}
+}  // namespace
+
+TEST(SlamReplay, TrajectoryAgainstGroundTruth) {
+  ros::NodeHandle nh, pnh("~");
+  int frames = 40;
+  double bound = 0.0;
+  pnh.param("frames", frames, 40);
+  ASSERT_TRUE(pnh.getParam("rms_bound_m", bound)) << "~rms_bound_m not set";
+  ros::Subscriber s = nh.subscribe("slam/odometry", 100, onOdom);
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(90.0);
+  size_t n = 0;
+  while (ros::WallTime::now() < end) {
+    ros::spinOnce();
+    {
+      std::lock_guard<std::mutex> l(m);
+      n = odometry.size();
+    }
+    if (static_cast<int>(n) >= frames) break;
+    ros::WallDuration(0.05).sleep();
+  }
+  std::lock_guard<std::mutex> l(m);
+  // Played at 1x with a queue of 10 frames: every frame is processed.
+  ASSERT_EQ(static_cast<int>(odometry.size()), frames);
+  const skin3d::sim::GlobeSimulator sim{skin3d::sim::GlobeConfig()};  // the bag's generator and defaults
+  double ss = 0.0;
+  for (const auto& o : odometry) {
+    const double t = o.header.stamp.toSec() - 1000.0;  // make_dataset's bags start at 1000 s
+    const Eigen::Vector3d truth = sim.poseWorldLeft(t).translation();
+    const Eigen::Vector3d p(o.pose.pose.position.x, o.pose.pose.position.y, o.pose.pose.position.z);
+    ss += (p - truth).squaredNorm();
+  }
+  const double rms = std::sqrt(ss / odometry.size());
+  std::printf("RMS position error over %zu frames: %.3f mm (bound %.3f mm)\n", odometry.size(), 1e3 * rms, 1e3 * bound);
+  EXPECT_LT(rms, bound);
+}
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_slam_replay");
+  return RUN_ALL_TESTS();
+}

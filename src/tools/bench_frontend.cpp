@@ -43,6 +43,7 @@
 #include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/features.h"
+#include "skin3d/stereo/rectification.h"
 #include "skin3d/stereo/stereo_landmarks.h"
 
 namespace {
@@ -94,21 +95,6 @@ cv::Mat fromMsg(const sensor_msgs::Image& m) {
   return out;
 }
 
-struct Maps {
-  cv::Mat map1, map2;
-};
-
-Maps rectificationMaps(const geometry::CameraInfo& c) {
-  cv::Mat K, R, P;
-  const Eigen::Matrix3d P3 = c.P.leftCols<3>();
-  cv::eigen2cv(c.K, K);
-  cv::eigen2cv(c.R, R);
-  cv::eigen2cv(P3, P);
-  Maps m;
-  cv::initUndistortRectifyMap(K, cv::Mat(c.D), R, P, cv::Size(c.width, c.height), CV_16SC2, m.map1, m.map2);
-  return m;
-}
-
 struct Summary {
   double mean = 0, median = 0, min = 0, max = 0;
 };
@@ -151,7 +137,7 @@ struct Result {
 };
 
 Result run(stereo::FeatureType type, const std::vector<RawPair>& frames, const geometry::CameraInfo& li,
-           const geometry::CameraInfo& ri, const Maps& lm, const Maps& rm, int octaves, int layers) {
+           const geometry::CameraInfo& ri, const stereo::Rectifier& lm, const stereo::Rectifier& rm, int octaves, int layers) {
   stereo::FeatureOptions opt;
   opt.type = type;
   opt.octaves = octaves;
@@ -167,9 +153,7 @@ Result run(stereo::FeatureType type, const std::vector<RawPair>& frames, const g
     const bool warm_up = k == 0;  // frame 0 once untimed, then every frame timed
     const RawPair& f = frames[warm_up ? 0 : k - 1];
     const auto t0 = Clock::now();
-    cv::Mat left, right;
-    cv::remap(f.left, left, lm.map1, lm.map2, cv::INTER_LINEAR);
-    cv::remap(f.right, right, rm.map1, rm.map2, cv::INTER_LINEAR);
+    const cv::Mat left = lm(f.left), right = rm(f.right);
     const auto t1 = Clock::now();
     stereo::ImageFeatures fl, fr;
     std::exception_ptr error;
@@ -311,7 +295,7 @@ int main(int argc, char** argv) {
 
   std::vector<Result> results;
   try {
-    const Maps lm = rectificationMaps(left_info), rm = rectificationMaps(right_info);
+    const stereo::Rectifier lm(left_info), rm(right_info);
     for (stereo::FeatureType t : types) {
       std::cerr << "bench_frontend: " << stereo::featureTypeName(t) << " on " << frames.size() << " frames ..."
                 << std::endl;

@@ -23,6 +23,7 @@
 #include "bag_reading.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/stereo/features.h"
+#include "skin3d/stereo/rectification.h"
 #include "skin3d/stereo/stereo_landmarks.h"
 
 using namespace skin3d;
@@ -39,17 +40,6 @@ std::vector<M> read(const std::string& bag_path, const std::string& topic) {
 }
 
 using skin3d::ros_conv::fromMsg;
-
-cv::Mat rectify(const sensor_msgs::Image& img, const geometry::CameraInfo& c) {
-  cv::Mat K, D(c.D), R, P, m1, m2, out;
-  cv::eigen2cv(c.K, K);
-  cv::eigen2cv(c.R, R);
-  cv::eigen2cv(c.P, P);
-  cv::initUndistortRectifyMap(K, D, R, P, cv::Size(c.width, c.height), CV_32FC1, m1, m2);
-  const cv::Mat raw(img.height, img.width, CV_8UC1, const_cast<uint8_t*>(img.data.data()), img.step);
-  cv::remap(raw, out, m1, m2, cv::INTER_LINEAR);
-  return out;
-}
 
 struct Stats {
   std::vector<int> per_frame;
@@ -75,12 +65,13 @@ Stats evaluate(const std::string& bag, const std::string& truth_path, stereo::Fe
   fo.type = type;
   fo.disparity_offset = L.P(0, 2) - R.P(0, 2);
   const stereo::StereoFeatureMatcher matcher(fo);
+  const stereo::Rectifier rect_l(L), rect_r(R);  // the maps once, as the nodelets do
   stereo::TriangulateOptions to;
   to.sigma_px = sigma_px;
   Stats s;
   double sum_sq = 0.0;
   for (size_t k = 0; k < limg.size(); ++k) {
-    const auto matches = matcher.process(rectify(limg[k], L), rectify(rimg[k], R));
+    const auto matches = matcher.process(rect_l(ros_conv::toMono8(limg[k])), rect_r(ros_conv::toMono8(rimg[k])));
     const auto lms = stereo::triangulateMatches(L, R, matches, to);
     s.per_frame.push_back(static_cast<int>(lms.size()));
     const auto& p = poses[k].pose;

@@ -48,9 +48,7 @@
  *    EskfOptions::joseph_explicit_gain the expanded expression is evaluated term by term with an
  *    explicit K (twice the flops); both agree with the literal dense form to rounding.
  *  - The reset touches only the 3 angular rows/columns: O(n).
- * Measured (test_eskf's disabled benchmark, 2-core CI machine, Release, SSE2 Eigen): 1000 landmarks
- * (n = 3012) and 30 observations (m = 90) per frame: update 28 ms with 2 threads (50 ms with 1; 64 ms
- * with joseph_explicit_gain), predict 0.2 ms.
+ * Timings (bench_slam, with the dense reference side by side): docs/BENCHMARKS.md, "ES-EKF SLAM".
  * predictDense(), updateDense(), updateGyroDense() and updateKnownDense() are the textbook dense O(n^3) forms (full F,
  * full H, literal Joseph, full G) kept for tests and benchmarks only.
  *

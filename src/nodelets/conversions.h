@@ -3,19 +3,30 @@
 #pragma once
 
 #include <cv_bridge/cv_bridge.h>
+#include <ros/node_handle.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <skin3d/IndurationReport.h>
 #include <skin3d/Landmark.h>
 #include <skin3d/LandmarkArray.h>
+#include <xmlrpcpp/XmlRpcValue.h>
 
 #include <Eigen/Core>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+#include <string>
 #include <vector>
 
-#include <string>
-
 #include "skin3d/geometry/camera.h"
+#include "skin3d/induration/induration.h"
+#include "skin3d/induration/induration_config.h"
 #include "skin3d/slam/slam_system.h"
+#include "skin3d/stereo/dense_stereo.h"
 
 namespace skin3d {
 namespace ros_conv {
@@ -101,6 +112,226 @@ inline cv::Mat toMono8(const sensor_msgs::Image& img) {
     return m8;
   }
   return cv_bridge::toCvCopy(img, enc::MONO8)->image;
+}
+
+// ------------------------------------------------------------------ dense stereo and induration
+
+/** @brief A ROS parameter as the text the core's option tables parse (numbers in full precision, booleans
+ *  true/false, lists space-separated); false for maps and other types. */
+inline bool xmlRpcToText(XmlRpc::XmlRpcValue& v, std::string* text) {
+  std::ostringstream out;
+  out.precision(17);
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeBoolean: out << (static_cast<bool>(v) ? "true" : "false"); break;
+    case XmlRpc::XmlRpcValue::TypeInt: out << static_cast<int>(v); break;
+    case XmlRpc::XmlRpcValue::TypeDouble: out << static_cast<double>(v); break;
+    case XmlRpc::XmlRpcValue::TypeString: out << static_cast<std::string>(v); break;
+    case XmlRpc::XmlRpcValue::TypeArray:
+      for (int i = 0; i < v.size(); ++i) {
+        std::string item;
+        if (v[i].getType() == XmlRpc::XmlRpcValue::TypeArray || !xmlRpcToText(v[i], &item)) return false;
+        out << (i ? " " : "") << item;
+      }
+      break;
+    default: return false;
+  }
+  *text = out.str();
+  return true;
+}
+
+/**
+ * @brief The dense stereo / induration options (induration/induration_config.h) from private parameters:
+ * first the YAML file named by ~config (if set), then every key of pipelineOptionKeys() that is set as a
+ * parameter, then validation. Problems go to `errors` (one line each, naming the key); a bad key keeps the
+ * value it had, options that do not validate are reset to the defaults (the last error says so).
+ */
+inline induration::PipelineOptions loadPipelineOptions(const ros::NodeHandle& pnh, std::vector<std::string>* errors) {
+  induration::PipelineOptions opt;
+  std::string config;
+  if (pnh.getParam("config", config) && !config.empty()) {
+    try {
+      induration::applyPipelineOptions(&opt, config);
+    } catch (const std::exception& e) {
+      errors->push_back(std::string("~config: ") + e.what());
+    }
+  }
+  for (const std::string& key : induration::pipelineOptionKeys()) {
+    XmlRpc::XmlRpcValue v;
+    if (!pnh.getParam(key, v)) continue;
+    std::string text;
+    if (!xmlRpcToText(v, &text)) {
+      errors->push_back("parameter ~" + key + " must be a value or a list of values; keeping " +
+                        induration::getPipelineOption(opt, key));
+      continue;
+    }
+    try {
+      induration::setPipelineOption(&opt, key, text);
+    } catch (const std::exception& e) {
+      errors->push_back(std::string(e.what()) + "; keeping " + induration::getPipelineOption(opt, key));
+    }
+  }
+  try {
+    opt.validate();
+  } catch (const std::exception& e) {
+    errors->push_back(std::string(e.what()) + "; using the defaults of config/induration.yaml for every parameter");
+    opt = induration::PipelineOptions();
+  }
+  return opt;
+}
+
+/** @brief Byte layout of the clouds that toCloudMsg writes (all float32). */
+enum DenseCloudField { kX = 0, kY, kZ, kRgb, kSigma, kRayX, kRayY, kRayZ, kDenseCloudFields };
+
+/**
+ * @brief An organised PointCloud2 of a dense cloud (size of the image): fields x y z (m; NaN unknown,
+ * is_dense false), rgb (packed float, from `colour`: grey or BGR 8-bit of the same size, white when empty),
+ * sigma (m, 1 sigma along the ray; NaN unknown) and ray_x ray_y ray_z (unit viewing ray of every pixel, known
+ * or not: what the induration needs to measure areas over holes).
+ */
+inline sensor_msgs::PointCloud2Ptr toCloudMsg(const stereo::DenseCloud& cloud, const cv::Mat& colour,
+                                              const std_msgs::Header& header) {
+  const sensor_msgs::PointCloud2Ptr pc(new sensor_msgs::PointCloud2);
+  pc->header = header;
+  sensor_msgs::PointCloud2Modifier mod(*pc);
+  const auto F = sensor_msgs::PointField::FLOAT32;
+  mod.setPointCloud2Fields(kDenseCloudFields, "x", 1, F, "y", 1, F, "z", 1, F, "rgb", 1, F, "sigma", 1, F, "ray_x", 1,
+                           F, "ray_y", 1, F, "ray_z", 1, F);
+  const int rows = cloud.xyz.rows, cols = cloud.xyz.cols;
+  mod.resize(static_cast<size_t>(rows) * cols);
+  pc->height = rows;
+  pc->width = cols;
+  pc->row_step = cols * pc->point_step;
+  pc->is_dense = false;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const bool has_sigma = cloud.sigma.size() == cloud.xyz.size() && cloud.sigma.type() == CV_32F;
+  const bool has_ray = cloud.ray.size() == cloud.xyz.size() && cloud.ray.type() == CV_32FC3;
+  const bool has_colour = colour.size() == cloud.xyz.size() && colour.depth() == CV_8U &&
+                          (colour.channels() == 1 || colour.channels() == 3);
+  float p[kDenseCloudFields];
+  uint8_t* out = pc->data.data();
+  for (int v = 0; v < rows; ++v)
+    for (int u = 0; u < cols; ++u, out += pc->point_step) {
+      const cv::Vec3f& X = cloud.xyz.at<cv::Vec3f>(v, u);
+      p[kX] = X[0], p[kY] = X[1], p[kZ] = X[2];
+      uint8_t bgr[3] = {255, 255, 255};
+      if (has_colour && colour.channels() == 1) bgr[0] = bgr[1] = bgr[2] = colour.at<uint8_t>(v, u);
+      if (has_colour && colour.channels() == 3) {
+        const cv::Vec3b& c = colour.at<cv::Vec3b>(v, u);
+        bgr[0] = c[0], bgr[1] = c[1], bgr[2] = c[2];
+      }
+      const uint32_t rgb = (uint32_t(bgr[2]) << 16) | (uint32_t(bgr[1]) << 8) | uint32_t(bgr[0]);
+      std::memcpy(&p[kRgb], &rgb, sizeof(float));
+      p[kSigma] = has_sigma ? cloud.sigma.at<float>(v, u) : nan;
+      const cv::Vec3f r = has_ray ? cloud.ray.at<cv::Vec3f>(v, u) : cv::Vec3f(nan, nan, nan);
+      p[kRayX] = r[0], p[kRayY] = r[1], p[kRayZ] = r[2];
+      std::memcpy(out, p, sizeof(p));
+    }
+  return pc;
+}
+
+/**
+ * @brief The dense cloud of an organised PointCloud2 (fields x y z float32 required; sigma, ray_x/y/z and rgb
+ * used when present). Without `sigma`, sigma is 0 (unknown) at every known point; without rays, the ray of
+ * a known point is its unit direction from the origin (the left camera centre), NaN elsewhere. `colour`
+ * (optional) gets the rgb field as 8-bit BGR (empty without one).
+ * @return empty on success, else what is wrong with the message (names the topic).
+ */
+inline std::string fromCloudMsg(const sensor_msgs::PointCloud2& pc, const std::string& topic,
+                                stereo::DenseCloud* cloud, cv::Mat* colour) {
+  auto field = [&pc](const std::string& name) -> const sensor_msgs::PointField* {
+    for (const auto& f : pc.fields)
+      if (f.name == name) return &f;
+    return nullptr;
+  };
+  if (pc.height < 2 || pc.width < 2)
+    return topic + ": the cloud is not organised (" + std::to_string(pc.width) + "x" + std::to_string(pc.height) +
+           "); an image-shaped cloud from skin3d/dense_stereo is needed";
+  for (const char* name : {"x", "y", "z"}) {
+    const auto* f = field(name);
+    if (!f) return topic + ": the cloud has no field '" + name + "'";
+    if (f->datatype != sensor_msgs::PointField::FLOAT32 || f->count != 1 || f->offset + 4 > pc.point_step)
+      return topic + ": field '" + name + "' is not one float32 inside the point";
+  }
+  if (pc.is_bigendian) return topic + ": big-endian clouds are not supported";
+  if (pc.row_step != pc.width * pc.point_step || pc.data.size() != static_cast<size_t>(pc.row_step) * pc.height)
+    return topic + ": data size " + std::to_string(pc.data.size()) + " does not match " + std::to_string(pc.height) +
+           " rows of " + std::to_string(pc.width) + " points of " + std::to_string(pc.point_step) + " bytes";
+  auto floatField = [&](const std::string& name) -> int {
+    const auto* f = field(name);
+    return f && f->datatype == sensor_msgs::PointField::FLOAT32 && f->count == 1 && f->offset + 4 <= pc.point_step
+               ? static_cast<int>(f->offset)
+               : -1;
+  };
+  const int ox = floatField("x"), oy = floatField("y"), oz = floatField("z"), os = floatField("sigma");
+  const int orx = floatField("ray_x"), ory = floatField("ray_y"), orz = floatField("ray_z");
+  const bool has_ray = orx >= 0 && ory >= 0 && orz >= 0;
+  const auto* rgb = field("rgb");
+  const int orgb = rgb && rgb->count == 1 && rgb->offset + 4 <= pc.point_step &&
+                           (rgb->datatype == sensor_msgs::PointField::FLOAT32 ||
+                            rgb->datatype == sensor_msgs::PointField::UINT32)
+                       ? static_cast<int>(rgb->offset)
+                       : -1;
+  const int rows = static_cast<int>(pc.height), cols = static_cast<int>(pc.width);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cloud->xyz.create(rows, cols, CV_32FC3);
+  cloud->sigma.create(rows, cols, CV_32F);
+  cloud->ray.create(rows, cols, CV_32FC3);
+  if (colour) {
+    if (orgb >= 0)
+      colour->create(rows, cols, CV_8UC3);
+    else
+      *colour = cv::Mat();
+  }
+  auto get = [](const uint8_t* p, int offset) {
+    float f;
+    std::memcpy(&f, p + offset, sizeof(float));
+    return f;
+  };
+  const uint8_t* in = pc.data.data();
+  for (int v = 0; v < rows; ++v)
+    for (int u = 0; u < cols; ++u, in += pc.point_step) {
+      const cv::Vec3f X(get(in, ox), get(in, oy), get(in, oz));
+      const bool known = std::isfinite(X[0]) && std::isfinite(X[1]) && std::isfinite(X[2]);
+      cloud->xyz.at<cv::Vec3f>(v, u) = known ? X : cv::Vec3f(nan, nan, nan);
+      float s = os >= 0 ? get(in, os) : 0.0f;
+      if (!std::isfinite(s)) s = known ? 0.0f : nan;
+      cloud->sigma.at<float>(v, u) = known ? s : nan;
+      if (has_ray) {
+        cloud->ray.at<cv::Vec3f>(v, u) = cv::Vec3f(get(in, orx), get(in, ory), get(in, orz));
+      } else {
+        const float n = std::sqrt(X.dot(X));
+        cloud->ray.at<cv::Vec3f>(v, u) = known && n > 0 ? X / n : cv::Vec3f(nan, nan, nan);
+      }
+      if (colour && orgb >= 0) {  // packed 0x00RRGGBB, little-endian: bytes b g r
+        const uint8_t* c = in + orgb;
+        colour->at<cv::Vec3b>(v, u) = cv::Vec3b(c[0], c[1], c[2]);
+      }
+    }
+  return "";
+}
+
+/** @brief The report message of one measurement (SI units, frame of `header`). */
+inline skin3d::IndurationReport toReportMsg(const induration::IndurationResult& r, const std_msgs::Header& header) {
+  skin3d::IndurationReport m;
+  m.header = header;
+  const Eigen::Vector4d plane = r.reference.plane();
+  for (int i = 0; i < 4; ++i) m.reference_plane[i] = plane[i];
+  m.reference_rms = r.reference.rms;
+  for (const auto& p : r.plaques) {
+    skin3d::Plaque q;
+    q.id = static_cast<uint32_t>(p.id);
+    q.centroid.x = p.centroid.x();
+    q.centroid.y = p.centroid.y();
+    q.centroid.z = p.centroid.z();
+    q.area = p.area;
+    q.mean_height = p.mean_height;
+    q.max_height = p.max_height;
+    q.std_height = p.std_height;
+    q.pasi_class = static_cast<uint8_t>(p.pasi_class);
+    m.plaques.push_back(q);
+  }
+  m.warnings = r.warnings;
+  return m;
 }
 
 }  // namespace ros_conv

@@ -7,11 +7,14 @@
  *             (K = P[0:3,0:3], D = 0, R = I, P unchanged).
  * Parameters: ~approximate_sync (bool, false): ApproximateTime instead of ExactTime;
  *             ~queue_size (int, 5); ~max_stamp_diff (double s, 0.005): with approximate sync, pairs
- *             further apart are dropped; ~interpolation (int, 1 = linear, cv::InterpolationFlags).
+ *             further apart are dropped. Interpolation is bilinear (stereo::Rectifier, the same maps as
+ *             process_bag and the benchmarks).
+ * Note: image_geometry's PinholeCameraModel::rectifyImage copies the raw image unchanged when all distortion
+ * coefficients are zero, ignoring R; a converged rig (or any perturbed calibration) has R != I, so the
+ * core's Rectifier is used (maps rebuilt only when a camera_info changes).
  * Bad input (sizes, encodings, uncalibrated camera_info, frame_id or stamp mismatch) drops that frame
  * with a throttled warning naming the topic; the nodelet keeps running.
  */
-#include <image_geometry/pinhole_camera_model.h>
 #include <image_transport/image_transport.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
@@ -25,6 +28,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "conversions.h"
+#include "skin3d/stereo/rectification.h"
 
 namespace skin3d {
 
@@ -43,7 +47,7 @@ class StereoRectifyNodelet : public nodelet::Nodelet {
     pnh.param("approximate_sync", approx, false);
     pnh.param("queue_size", queue, 5);
     pnh.param("max_stamp_diff", max_stamp_diff_, 0.005);
-    pnh.param("interpolation", interpolation_, 1);
+    if (pnh.hasParam("interpolation")) NODELET_WARN("stereo_rectify: ~interpolation is no longer used (always bilinear)");
     if (queue < 1) {
       NODELET_WARN("stereo_rectify: ~queue_size = %d must be >= 1; using 5", queue);
       queue = 5;
@@ -88,22 +92,30 @@ class StereoRectifyNodelet : public nodelet::Nodelet {
     }
     try {
       std::lock_guard<std::mutex> lock(mutex_);
-      left_model_.fromCameraInfo(lc);  // caches the maps while the camera_info does not change
-      right_model_.fromCameraInfo(rc);
-      publish(*li, left_model_, pub_left_, pub_left_info_, *lc);
-      publish(*ri, right_model_, pub_right_, pub_right_info_, *rc);
+      update(*lc, &left_info_, &left_rect_);  // maps rebuilt only when the camera_info changes
+      update(*rc, &right_info_, &right_rect_);
+      publish(*li, *left_rect_, pub_left_, pub_left_info_, *lc);
+      publish(*ri, *right_rect_, pub_right_, pub_right_info_, *rc);
     } catch (const std::exception& e) {
       NODELET_WARN_THROTTLE(2.0, "stereo_rectify: dropping frame: %s", e.what());
     }
   }
 
-  void publish(const Image& raw, const image_geometry::PinholeCameraModel& model, image_transport::Publisher& pub,
+  static void update(const CameraInfo& info, CameraInfo* cached, std::unique_ptr<stereo::Rectifier>* rect) {
+    if (*rect && info.K == cached->K && info.D == cached->D && info.R == cached->R && info.P == cached->P &&
+        info.width == cached->width && info.height == cached->height)
+      return;
+    *rect = std::make_unique<stereo::Rectifier>(ros_conv::fromMsg(info));
+    *cached = info;
+  }
+
+  void publish(const Image& raw, const stereo::Rectifier& rectifier, image_transport::Publisher& pub,
                ros::Publisher& pub_info, const CameraInfo& info) {
     const cv::Mat gray = ros_conv::toMono8(raw);
     cv_bridge::CvImage out;
     out.header = raw.header;
     out.encoding = sensor_msgs::image_encodings::MONO8;
-    model.rectifyImage(gray, out.image, interpolation_);
+    out.image = rectifier(gray);
     pub.publish(out.toImageMsg());
     CameraInfo rect = info;
     for (int i = 0; i < 9; ++i) rect.K[i] = info.P[(i / 3) * 4 + i % 3];
@@ -119,10 +131,10 @@ class StereoRectifyNodelet : public nodelet::Nodelet {
   message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
   std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
   std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
-  image_geometry::PinholeCameraModel left_model_, right_model_;
+  CameraInfo left_info_, right_info_;
+  std::unique_ptr<stereo::Rectifier> left_rect_, right_rect_;
   std::mutex mutex_;
   double max_stamp_diff_ = 0.005;
-  int interpolation_ = 1;
 };
 
 }  // namespace skin3d

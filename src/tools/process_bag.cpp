@@ -14,6 +14,10 @@
  * --known-map MAP.csv: thesis experiment 1, the landmarks are known (make_dataset globe-landmarks writes
  * FILE.map.csv beside the bag: positions and descriptors); association by descriptor + Mahalanobis gate.
  *
+ * --induration: the induration measurement instead of SLAM (issue 6): every stereo pair is rectified, densely
+ * matched and measured (process_bag_induration.cpp); --config / --set then take the keys of
+ * config/induration.yaml. Writes induration.yaml, height_map.png and surface.ply.
+ *
  * Exit codes: 0 ok, 1 bad configuration or data, 2 bad command line, 3 cannot write the output.
  */
 #include <geometry_msgs/PoseStamped.h>
@@ -35,6 +39,7 @@
 #include <string>
 
 #include "conversions.h"  // src/nodelets
+#include "process_bag_induration.h"
 #include "skin3d/geometry/sphere_fit.h"
 #include "skin3d/slam/results.h"
 #include "skin3d/slam/slam_config.h"
@@ -57,13 +62,15 @@ const char* kUsage =
     "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
     "  --features   front end for image bags (default kaze)\n"
     "  --frames     process at most N frames\n"
-    "  --set        override one SLAM parameter (repeatable)\n";
+    "  --set        override one SLAM parameter (repeatable)\n"
+    "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
+    "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n";
 
 struct Args {
   std::string bag, out, known_map, features = "kaze";
   std::vector<std::string> configs;
   std::vector<std::pair<std::string, std::string>> sets;
-  bool gyro = false, quiet = false;
+  bool gyro = false, quiet = false, induration = false;
   int frames = -1;
 };
 
@@ -252,6 +259,7 @@ int main(int argc, char** argv) {
     else if (k == "--frames") a.frames = std::atoi(value().c_str());
     else if (k == "--gyro") a.gyro = true;
     else if (k == "--quiet") a.quiet = true;
+    else if (k == "--induration") a.induration = true;
     else if (k == "--set") {
       const std::string kv = value();
       const auto eq = kv.find('=');
@@ -275,6 +283,16 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    if (a.induration) {
+      tools::IndurationRun r;
+      r.bag = a.bag;
+      r.out = a.out;
+      r.configs = a.configs;
+      r.sets = a.sets;
+      r.frames = a.frames;
+      r.quiet = a.quiet;
+      return tools::runInduration(r);
+    }
     return run(a);
   } catch (const std::runtime_error& e) {
     std::cerr << "process_bag: " << e.what() << std::endl;

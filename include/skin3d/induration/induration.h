@@ -1,0 +1,124 @@
+/**
+ * @file induration.h
+ * @brief Induration measurement on an organised dense cloud: outlier removal, healthy-skin reference
+ * surface, height map, plaque segmentation, per-plaque statistics and the PASImeter induration class.
+ *
+ * Steps (measureInduration):
+ *  1. Statistical outlier removal on the organised cloud (pixel neighbours instead of a k-d tree: the mean
+ *     distance of a point to its known 8 neighbours; beyond mean + `sor_std_ratio` std of the cloud's
+ *     distances = outlier; the same rule as PCL's StatisticalOutlierRemoval).
+ *  2. Reference surface: a RANSAC plane (PCL SACSegmentation on a subsample) gives the start; then
+ *     alternate (a) a robust (Tukey) least-squares fit of the reference model ("plane" or "quadratic":
+ *     height over the plane as a quadric of the in-plane coordinates, for curved skin) to the points not
+ *     marked as plaque, and (b) marking as plaque the regions of at least a quarter of `min_area` that
+ *     stand above the detection threshold (see 4; dilated by `exclusion_margin_px`), until the mask stops
+ *     changing. (Excluding every noisy pixel above the threshold instead would bias the fit downwards.)
+ *  3. Height map: signed distance above the reference (m), smoothed with a Gaussian of `smoothing_px`
+ *     (NaN-aware) for segmentation only; statistics use the unsmoothed heights.
+ *  4. Plaques: connected regions (8-connected) of the smoothed map above the detection threshold
+ *     (`min_height`, or 3 robust sigma of the smoothed healthy-skin heights where the surface is noisier), at least `min_area`
+ *     on the reference; each region's boundary is then re-drawn at `edge_fraction` of its own median height
+ *     (a half-height boundary: the blur of the matching window moves it neither in nor out; where the
+ *     matcher left the step edge unknown, the gap is bridged from both sides so the boundary falls in its
+ *     middle), holes filled. Regions whose surroundings are less than 80 % known (the edge of the measured
+ *     surface, islands of mismatches) or higher than `max_height` are ignored with a warning.
+ *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference:
+ *     the ray's intersection with it, |n . (dX/du x dX/dv)|), and over its interior (eroded by
+ *     `interior_margin_px`: the matching window turns the edge into a ramp about a window wide) mean / std
+ *     height, max height (the 99th percentile: one noisy pixel must not set it), and the PASImeter class of
+ *     the mean height.
+ *
+ * PASImeter induration classes (thesis §1, app. B: five classes 0-4, 0.25 mm apart): class k is the card
+ * step k * 0.25 mm that the plaque matches best, i.e. the boundaries are half-way between the steps:
+ * 0: h < 0.125 mm, 1: 0.125-0.375, 2: 0.375-0.625, 3: 0.625-0.875, 4: >= 0.875 mm
+ * (`pasi_boundaries`, configurable).
+ *
+ * SPDX-License-Identifier: BSD-3-Clause
+ */
+#pragma once
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "skin3d/stereo/dense_stereo.h"
+
+namespace skin3d {
+namespace induration {
+
+/** @brief A bad option (names it). Problems with the data are warnings in the result, not exceptions. */
+class IndurationError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+struct IndurationOptions {
+  std::string reference_model = "plane";  //!< "plane" or "quadratic" (curved skin)
+  double min_height = 0.05e-3;       //!< m: a point this far above the reference belongs to a plaque
+  double min_area = 4e-6;            //!< m^2: smaller regions are not plaques
+  double max_height = 5e-3;          //!< m: higher regions are not skin plaques (ignored with a warning)
+  double smoothing_px = 2.0;         //!< Gaussian sigma for segmentation, px (0 = none)
+  double edge_fraction = 0.5;        //!< plaque boundary at this fraction of its median height
+  int exclusion_margin_px = 5;       //!< plaque mask dilation when fitting the reference
+  int interior_margin_px = 8;        //!< heights are measured this far inside the plaque boundary (matching-window ramp)
+  double sor_std_ratio = 3.0;        //!< statistical outlier removal threshold (std of neighbour distances)
+  double ransac_threshold = 0.2e-3;  //!< m: RANSAC plane inlier distance
+  int fit_points = 200000;           //!< at most this many points (a regular subsample) in each fit
+  int max_iterations = 10;           //!< reference / plaque-mask alternations
+  double min_reference_fraction = 0.15;  //!< healthy skin must be at least this fraction of the known points
+  std::vector<double> pasi_boundaries = {0.125e-3, 0.375e-3, 0.625e-3, 0.875e-3};  //!< m, increasing
+  void validate() const;             //!< throws IndurationError naming the option
+};
+
+/** @brief The healthy-skin reference: a plane n.x + d = 0 (n unit, towards the camera) and, for the
+ *  quadratic model, a height offset c0 + c1 u + c2 v + c3 u^2 + c4 u v + c5 v^2 along n, with (u, v) the
+ *  in-plane coordinates of x about `origin` along `e1`, `e2`. */
+struct ReferenceSurface {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double d = 0;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero(), e1 = Eigen::Vector3d::UnitX(), e2 = Eigen::Vector3d::UnitY();
+  Eigen::Matrix<double, 6, 1> quadric = Eigen::Matrix<double, 6, 1>::Zero();  //!< m; zero for the plane model
+  std::string model = "plane";
+  double rms = 0;          //!< m, RMS of the healthy-skin points about the surface
+  int points = 0;          //!< healthy-skin points used
+  /** @brief Signed height of x above the surface (m, positive towards the camera). */
+  double height(const Eigen::Vector3d& x) const;
+  /** @brief The plane as (n, d) for messages. */
+  Eigen::Vector4d plane() const { return Eigen::Vector4d(normal.x(), normal.y(), normal.z(), d); }
+};
+
+struct Plaque {
+  int id = 0;                  //!< 1, 2, ... in order of decreasing area
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  //!< m, frame of the cloud
+  double area = 0;             //!< m^2 on the reference
+  double mean_height = 0, max_height = 0, std_height = 0;  //!< m
+  double mean_height_sigma = 0;  //!< m, standard error of the mean height (from the per-point sigmas)
+  int pasi_class = 0;
+  int pixels = 0;
+  cv::Rect bbox;               //!< in the image
+};
+
+struct IndurationResult {
+  ReferenceSurface reference;
+  cv::Mat height_map;          //!< CV_32F, m above the reference (unsmoothed), NaN unknown
+  cv::Mat labels;              //!< CV_32S: 0 healthy or unknown, k = plaque id k
+  std::vector<Plaque> plaques;
+  std::vector<std::string> warnings;  //!< e.g. "no healthy skin left to fit the reference"
+  bool reference_ok = false;   //!< false: no height map (too few points or no healthy skin)
+  int known_points = 0, outliers_removed = 0;
+  double detection_threshold = 0;  //!< m: max(min_height, 3 robust sigma of the smoothed healthy-skin heights)
+};
+
+/** @brief PASImeter class of a height (m) with the given increasing boundaries (m). */
+int pasiClass(double height, const std::vector<double>& boundaries);
+
+/**
+ * @brief Measures the plaques in an organised cloud (see the file comment).
+ * @throws IndurationError for bad options only; empty or hopeless data give warnings and reference_ok false.
+ */
+IndurationResult measureInduration(const stereo::DenseCloud& cloud, const IndurationOptions& options);
+
+}  // namespace induration
+}  // namespace skin3d

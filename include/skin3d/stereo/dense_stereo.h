@@ -1,0 +1,122 @@
+/**
+ * @file dense_stereo.h
+ * @brief Dense matching of a rectified stereo pair with sub-pixel disparity, left-right consistency and a
+ * per-pixel disparity uncertainty, and its triangulation into an organised point cloud.
+ *
+ * Pipeline (computeDisparity):
+ *  1. Region of interest of the left rectified image (bounds the time on 13-megapixel images).
+ *  2. Coarse level: the pair is halved until it is at most `coarse_max_width` wide; OpenCV's semi-global
+ *     matcher (StereoSGBM) runs there on the disparity range of the working depths, left-right checked
+ *     (a right-to-left pass; disagreement > `lr_max_diff` px at that level = unknown), speckles removed.
+ *  3. Refinement, coarse to fine up to full resolution: iterative local correlation fit (1-D Lucas-Kanade
+ *     along the rows, plus a vertical term that absorbs residual rectification error) on locally
+ *     normalised images (zero mean, unit contrast in a window: gain, offset and gamma differences
+ *     between the cameras drop out). The right image is resampled at the current disparity field with
+ *     bicubic interpolation each iteration, so the local slant (foreshortening between converged views)
+ *     is followed exactly and there is no pixel locking (no 1/16-px quantisation, no parabola bias).
+ *     A pixel whose fit moves more than `refine_max_shift` (semi-global level) px from the semi-global
+ *     value, or whose window has too little texture (`min_texture`), too large a sigma (`max_sigma`) or a
+ *     normalised correlation below 0.5 (the images do not look alike there), becomes unknown.
+ *  4. Uncertainty: sigma_d^2 = s^2 / sum(w * Ix^2) over the window, s^2 the window's residual variance
+ *     (the Gauss-Newton covariance of the fitted shift). Neighbouring pixels share most of their window,
+ *     so their errors are correlated over about the window size.
+ *
+ * Disparity convention: d = x_left - x_right in rectified pixels (a rig rectified with flags 0 has a
+ * different cx per camera, so d may be negative; depth Z = fx B / (d - (cx_left - cx_right))).
+ *
+ * SPDX-License-Identifier: BSD-3-Clause
+ */
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "skin3d/geometry/camera.h"
+
+namespace skin3d {
+namespace stereo {
+
+/** @brief Bad dense-stereo input (empty or mismatched images, ROI outside the image, bad option): names it. */
+class DenseStereoError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+struct DenseStereoOptions {
+  /** Disparity search range at full resolution, px (x_left - x_right). Both NaN: the caller must set
+   *  them (see disparityRangeForDepth); computeDisparity throws if they are not finite and ordered. */
+  double min_disparity = std::numeric_limits<double>::quiet_NaN();
+  double max_disparity = std::numeric_limits<double>::quiet_NaN();
+  cv::Rect roi;                  //!< region of the left rectified image to match; empty = whole image
+  // --- semi-global matching (coarse level)
+  int coarse_max_width = 1400;   //!< px: the pair is halved (at most 6 times) until the ROI is at most this wide
+  std::string sgbm_mode = "sgbm_3way";  //!< "sgbm" (5 paths), "hh" (8 paths, full-image memory), "sgbm_3way"
+  int block_size = 5;            //!< odd, 1 ... 11
+  int p1 = 0;                    //!< smoothness penalties; 0 = 8 * block^2 and 32 * block^2 (OpenCV's advice)
+  int p2 = 0;
+  int uniqueness_ratio = 10;     //!< %, best cost must beat the second best by this margin
+  double lr_max_diff = 1.0;      //!< px at the coarse level: left-right check tolerance
+  int speckle_window = 100;      //!< px: connected blobs smaller than this are removed (0 = off)
+  double speckle_range = 2.0;    //!< px: disparity step that separates blobs
+  // --- sub-pixel refinement
+  std::string subpixel = "lk";   //!< "lk": local correlation fit (above); "sgbm": SGBM's own 1/16-px parabola
+  int refine_window = 11;        //!< odd window of the local fit, px at each level
+  int refine_iterations = 3;     //!< Gauss-Newton iterations per pyramid level (more at full resolution: +1)
+  double refine_max_shift = 1.0; //!< px at the semi-global level: a fit farther than this from its value = unknown
+  double max_sigma = 0.5;        //!< px: pixels with a larger disparity sigma are unknown
+  double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
+  bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
+};
+
+/** @brief Timing of each stage, seconds (wall clock). */
+struct DenseStereoTiming {
+  double prepare = 0, sgbm = 0, refine = 0, total = 0;
+};
+
+struct DisparityMap {
+  cv::Mat disparity;        //!< CV_32F, size of the left image, px (x_left - x_right); NaN = unknown or outside ROI
+  cv::Mat sigma;            //!< CV_32F, px, 1 sigma of the disparity; NaN where unknown
+  cv::Mat vertical;         //!< CV_32F, px, fitted vertical shift y_right - y_left; NaN where unknown
+  cv::Rect roi;             //!< the region actually matched (the option clipped to the image)
+  int coarse_scale = 1;     //!< 2^levels: the semi-global matcher's downsampling factor
+  double valid_fraction = 0;  //!< known pixels / ROI pixels
+  std::vector<std::string> warnings;  //!< human-readable problems (no texture, little overlap, saturation...)
+  DenseStereoTiming timing;
+};
+
+/**
+ * @brief Dense disparity of a rectified pair (8-bit or 16-bit, grey or BGR; both the same size and type).
+ * @throws DenseStereoError naming the problem (empty or mismatched images, ROI outside the image,
+ *         bad range or option). A pair that cannot be matched (no texture, no overlap) is not an
+ *         error: the map is all NaN and `warnings` says why.
+ */
+DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& options);
+
+/**
+ * @brief Full-resolution disparity range [min, max] of depths z_min ... z_max (m, along the rectified
+ * left camera's axis) for a rectified pair: d = fx B / Z + (cx_left - cx_right).
+ * @throws DenseStereoError unless 0 < z_min < z_max and the pair is a horizontal rectified pair.
+ */
+std::pair<double, double> disparityRangeForDepth(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
+                                                 double z_min, double z_max);
+
+/** @brief Organised point cloud of a disparity map. */
+struct DenseCloud {
+  cv::Mat xyz;              //!< CV_32FC3, m, in the left camera's (unrectified) optical frame: R^T * X_rect; NaN unknown
+  cv::Mat sigma;            //!< CV_32F, m, 1 sigma of the point along its viewing ray (from the disparity sigma)
+  cv::Mat ray;              //!< CV_32FC3, unit viewing ray of every pixel (known or not), same frame as xyz
+};
+
+/**
+ * @brief Triangulates a disparity map with the rectified pair's projections (P of each CameraInfo; the
+ * left R rotates the result back into the left optical frame).
+ * @throws DenseStereoError if the map is empty or the CameraInfos do not describe a rectified pair of its size.
+ */
+DenseCloud triangulateDisparity(const DisparityMap& map, const geometry::CameraInfo& left,
+                                const geometry::CameraInfo& right);
+
+}  // namespace stereo
+}  // namespace skin3d

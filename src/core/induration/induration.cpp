@@ -1,0 +1,540 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Induration measurement: see include/skin3d/induration/induration.h.
+#include "skin3d/induration/induration.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <numeric>
+#include <opencv2/imgproc.hpp>
+
+#include "../common/text.h"
+#include "reference_ransac.h"
+
+namespace skin3d {
+namespace induration {
+
+using common::num;
+
+void IndurationOptions::validate() const {
+  if (reference_model != "plane" && reference_model != "quadratic")
+    throw IndurationError("reference_model '" + reference_model + "' is not plane or quadratic");
+  if (!(min_height > 0)) throw IndurationError("min_height " + num(min_height) + " m must be > 0");
+  if (!(min_area >= 0)) throw IndurationError("min_area " + num(min_area) + " m^2 must be >= 0");
+  if (!(smoothing_px >= 0) || smoothing_px > 50) throw IndurationError("smoothing_px " + num(smoothing_px) + " must be 0 ... 50");
+  if (!(edge_fraction > 0 && edge_fraction < 1)) throw IndurationError("edge_fraction " + num(edge_fraction) + " must be in (0, 1)");
+  if (exclusion_margin_px < 0 || exclusion_margin_px > 200)
+    throw IndurationError("exclusion_margin_px " + std::to_string(exclusion_margin_px) + " must be 0 ... 200");
+  if (!(sor_std_ratio > 0)) throw IndurationError("sor_std_ratio " + num(sor_std_ratio) + " must be > 0");
+  if (!(ransac_threshold > 0)) throw IndurationError("ransac_threshold " + num(ransac_threshold) + " m must be > 0");
+  if (!(max_height > min_height)) throw IndurationError("max_height " + num(max_height) + " m must be > min_height");
+  if (interior_margin_px < 0 || interior_margin_px > 200)
+    throw IndurationError("interior_margin_px " + std::to_string(interior_margin_px) + " must be 0 ... 200");
+  if (fit_points < 100) throw IndurationError("fit_points " + std::to_string(fit_points) + " must be >= 100");
+  if (max_iterations < 1) throw IndurationError("max_iterations " + std::to_string(max_iterations) + " must be >= 1");
+  if (!(min_reference_fraction > 0 && min_reference_fraction < 1))
+    throw IndurationError("min_reference_fraction " + num(min_reference_fraction) + " must be in (0, 1)");
+  if (pasi_boundaries.size() != 4) throw IndurationError("pasi_boundaries must hold 4 heights (classes 0-4)");
+  for (std::size_t i = 0; i < pasi_boundaries.size(); ++i)
+    if (!(pasi_boundaries[i] > 0) || (i > 0 && !(pasi_boundaries[i] > pasi_boundaries[i - 1])))
+      throw IndurationError("pasi_boundaries must be positive and increasing (m)");
+}
+
+int pasiClass(double height, const std::vector<double>& boundaries) {
+  int k = 0;
+  for (double b : boundaries)
+    if (height >= b) ++k;
+  return k;
+}
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+inline bool known(const cv::Vec3f& p) { return !std::isnan(p[0]); }
+
+/** Statistical outlier removal on the organised cloud: mean distance to the known 8 neighbours. */
+int removeOutliers(cv::Mat& xyz, double std_ratio) {
+  cv::Mat md(xyz.size(), CV_32F, cv::Scalar(kNaN));
+  double sum = 0, sum2 = 0;
+  long n = 0;
+  for (int y = 0; y < xyz.rows; ++y) {
+    for (int x = 0; x < xyz.cols; ++x) {
+      const cv::Vec3f& p = xyz.at<cv::Vec3f>(y, x);
+      if (!known(p)) continue;
+      double s = 0;
+      int k = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (!dx && !dy) continue;
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || xx < 0 || yy >= xyz.rows || xx >= xyz.cols) continue;
+          const cv::Vec3f& q = xyz.at<cv::Vec3f>(yy, xx);
+          if (!known(q)) continue;
+          s += cv::norm(p - q);
+          ++k;
+        }
+      if (k == 0) continue;  // isolated: judged below
+      const double m = s / k;
+      md.at<float>(y, x) = static_cast<float>(m);
+      sum += m;
+      sum2 += m * m;
+      ++n;
+    }
+  }
+  if (n < 10) return 0;
+  const double mean = sum / n, sd = std::sqrt(std::max(0.0, sum2 / n - mean * mean));
+  const double limit = mean + std_ratio * sd;
+  int removed = 0;
+  for (int y = 0; y < xyz.rows; ++y)
+    for (int x = 0; x < xyz.cols; ++x) {
+      cv::Vec3f& p = xyz.at<cv::Vec3f>(y, x);
+      if (!known(p)) continue;
+      const float m = md.at<float>(y, x);
+      if (std::isnan(m) || m > limit) {
+        p = cv::Vec3f(kNaN, kNaN, kNaN);
+        ++removed;
+      }
+    }
+  return removed;
+}
+
+/** Tukey biweight of r with scale c. */
+inline double tukey(double r, double c) {
+  const double u = r / c;
+  return std::fabs(u) >= 1 ? 0.0 : (1 - u * u) * (1 - u * u);
+}
+
+/** Heights of every known point above `ref` (NaN elsewhere). */
+cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref) {
+  cv::Mat h(xyz.size(), CV_32F, cv::Scalar(kNaN));
+  for (int y = 0; y < xyz.rows; ++y) {
+    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
+    float* o = h.ptr<float>(y);
+    for (int x = 0; x < xyz.cols; ++x)
+      if (known(p[x])) o[x] = static_cast<float>(ref.height(Eigen::Vector3d(p[x][0], p[x][1], p[x][2])));
+  }
+  return h;
+}
+
+/** NaN-aware Gaussian smoothing (normalised convolution). */
+cv::Mat smoothNaN(const cv::Mat& h, double sigma) {
+  if (sigma <= 0) return h.clone();
+  cv::Mat k = (h == h), v = h.clone(), w;
+  v.setTo(0, ~k);
+  k.convertTo(w, CV_32F, 1.0 / 255.0);
+  cv::Mat vs, ws;
+  cv::GaussianBlur(v, vs, cv::Size(), sigma, sigma, cv::BORDER_REFLECT);
+  cv::GaussianBlur(w, ws, cv::Size(), sigma, sigma, cv::BORDER_REFLECT);
+  cv::Mat out = vs / ws;
+  out.setTo(kNaN, ~k);
+  return out;
+}
+
+/** Smoothed map with small gaps (up to a few times `gap_px` wide) filled from their surroundings: where the
+ *  matcher leaves a plaque's step edge unknown, the boundary at half height then falls in the gap's middle. */
+cv::Mat smoothFilled(const cv::Mat& h, double sigma, double gap_px) {
+  cv::Mat out = smoothNaN(h, sigma);
+  cv::Mat k = (out == out), v = out.clone(), w;
+  v.setTo(0, ~k);
+  k.convertTo(w, CV_32F, 1.0 / 255.0);
+  for (double g = 0.5 * gap_px; g <= 2 * gap_px; g *= 2) {
+    cv::Mat vs, ws;
+    cv::GaussianBlur(v, vs, cv::Size(), g, g, cv::BORDER_REFLECT);
+    cv::GaussianBlur(w, ws, cv::Size(), g, g, cv::BORDER_REFLECT);
+    for (int y = 0; y < out.rows; ++y)
+      for (int x = 0; x < out.cols; ++x)
+        if (std::isnan(out.at<float>(y, x)) && ws.at<float>(y, x) > 0.05f) out.at<float>(y, x) = vs.at<float>(y, x) / ws.at<float>(y, x);
+  }
+  return out;
+}
+
+/** Robust (Tukey IRLS) fit of the reference to the points where `use` is set, starting from `ref`. */
+bool fitReference(const cv::Mat& xyz, const cv::Mat& use, const std::string& model, int max_points, double max_scale,
+                  ReferenceSurface* ref) {
+  // a regular subsample of the usable points
+  std::vector<Eigen::Vector3d> pts;
+  const int total = cv::countNonZero(use);
+  if (total < 50) return false;
+  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(total) / max_points))));
+  for (int y = 0; y < xyz.rows; y += step) {
+    const uchar* u = use.ptr<uchar>(y);
+    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < xyz.cols; x += step)
+      if (u[x] && known(p[x])) pts.emplace_back(p[x][0], p[x][1], p[x][2]);
+  }
+  if (pts.size() < 50) return false;
+  std::vector<double> w(pts.size(), 1.0), r(pts.size());
+  ReferenceSurface cur = *ref;
+  for (int it = 0; it < 8; ++it) {
+    for (std::size_t i = 0; i < pts.size(); ++i) r[i] = cur.height(pts[i]);
+    std::vector<double> a(r.size());
+    for (std::size_t i = 0; i < r.size(); ++i) a[i] = std::fabs(r[i]);
+    std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+    // robust scale, at most a third of the RANSAC inlier distance (Tukey's cut-off then ~1.5 x that distance)
+    const double scale = std::min(std::max(1.4826 * a[a.size() / 2], 1e-7), max_scale / 3.0);
+    const double c = 4.685 * scale;
+    for (std::size_t i = 0; i < pts.size(); ++i) w[i] = tukey(r[i], c);
+    // weighted plane (PCA)
+    double ws = 0;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      ws += w[i];
+      mean += w[i] * pts[i];
+    }
+    if (ws <= 0) return false;
+    mean /= ws;
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (std::size_t i = 0; i < pts.size(); ++i) C += w[i] * (pts[i] - mean) * (pts[i] - mean).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+    Eigen::Vector3d n = es.eigenvectors().col(0);
+    if (n.dot(mean) > 0) n = -n;  // towards the camera (origin)
+    ReferenceSurface next;
+    next.model = model;
+    next.normal = n;
+    next.d = -n.dot(mean);
+    next.origin = mean;
+    next.e1 = (es.eigenvectors().col(2) - n * n.dot(es.eigenvectors().col(2))).normalized();
+    next.e2 = n.cross(next.e1);
+    if (model == "quadratic") {
+      // heights above the plane as a quadric of (u, v), weighted least squares
+      Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+      Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+      for (std::size_t i = 0; i < pts.size(); ++i) {
+        if (w[i] <= 0) continue;
+        const Eigen::Vector3d q = pts[i] - mean;
+        const double u = q.dot(next.e1), v = q.dot(next.e2), h = q.dot(n);
+        Eigen::Matrix<double, 6, 1> f;
+        f << 1, u, v, u * u, u * v, v * v;
+        A += w[i] * f * f.transpose();
+        b += w[i] * f * h;
+      }
+      next.quadric = A.ldlt().solve(b);
+      if (!next.quadric.allFinite()) next.quadric.setZero();
+    }
+    cur = next;
+  }
+  // final RMS of the (weighted-in) healthy points
+  double s2 = 0;
+  int k = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    if (w[i] <= 0) continue;
+    const double h = cur.height(pts[i]);
+    s2 += h * h;
+    ++k;
+  }
+  cur.rms = k > 0 ? std::sqrt(s2 / k) : 0;
+  cur.points = total;
+  *ref = cur;
+  return true;
+}
+
+/** Footprint on the reference plane of every pixel in `rect` (m^2), from the viewing rays. */
+cv::Mat footprint(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Rect& rect) {
+  cv::Mat P(rect.height + 1, rect.width + 1, CV_64FC3);
+  for (int y = 0; y <= rect.height; ++y)
+    for (int x = 0; x <= rect.width; ++x) {
+      const int yy = std::min(rect.y + y, ray.rows - 1), xx = std::min(rect.x + x, ray.cols - 1);
+      const cv::Vec3f& r = ray.at<cv::Vec3f>(yy, xx);
+      const Eigen::Vector3d d(r[0], r[1], r[2]);
+      const double den = ref.normal.dot(d);
+      const Eigen::Vector3d X = std::fabs(den) > 1e-9 ? Eigen::Vector3d(d * (-ref.d / den)) : Eigen::Vector3d::Zero();
+      P.at<cv::Vec3d>(y, x) = cv::Vec3d(X.x(), X.y(), X.z());
+    }
+  cv::Mat A(rect.size(), CV_64F);
+  for (int y = 0; y < rect.height; ++y)
+    for (int x = 0; x < rect.width; ++x) {
+      // a pixel at the image's last row/column reuses its neighbour's edge vectors
+      const int x0 = std::min(x, rect.width - 1), y0 = std::min(y, rect.height - 1);
+      const cv::Vec3d du = P.at<cv::Vec3d>(y0, x0 + 1) - P.at<cv::Vec3d>(y0, x0);
+      const cv::Vec3d dv = P.at<cv::Vec3d>(y0 + 1, x0) - P.at<cv::Vec3d>(y0, x0);
+      const cv::Vec3d c = du.cross(dv);
+      A.at<double>(y, x) = std::fabs(ref.normal.x() * c[0] + ref.normal.y() * c[1] + ref.normal.z() * c[2]);
+    }
+  return A;
+}
+
+/** Detection threshold: min_height, or 3 robust sigma of the smoothed healthy heights if that is larger
+ *  (healthy: `use` and within `band` of the reference, so that unmasked plaques do not inflate it). */
+double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_height, double band) {
+  std::vector<float> v;
+  const int total = cv::countNonZero(use);
+  const int step = std::max(1, static_cast<int>(std::sqrt(total / 50000.0)));
+  for (int y = 0; y < hs.rows; y += step)
+    for (int x = 0; x < hs.cols; x += step)
+      if (use.at<uchar>(y, x) && std::fabs(hs.at<float>(y, x)) < band) v.push_back(hs.at<float>(y, x));
+  if (v.size() < 20) return min_height;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  const float med = v[v.size() / 2];
+  for (auto& x : v) x = std::fabs(x - med);
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return std::max(min_height, 3.0 * 1.4826 * v[v.size() / 2]);
+}
+
+/** The connected regions (8-connected) of `mask` whose footprint on the reference is at least min_area / 4. */
+cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area) {
+  cv::Mat lab, stats, cents;
+  const int n = cv::connectedComponentsWithStats(mask, lab, stats, cents, 8, CV_32S);
+  std::vector<char> keep(n, 0);
+  for (int k = 1; k < n; ++k) {
+    // footprint of one pixel at the region's centre, times its pixel count
+    const int cx = std::min(ray.cols - 2, std::max(0, static_cast<int>(cents.at<double>(k, 0))));
+    const int cy = std::min(ray.rows - 2, std::max(0, static_cast<int>(cents.at<double>(k, 1))));
+    const double a = footprint(ray, ref, cv::Rect(cx, cy, 1, 1)).at<double>(0, 0);
+    keep[k] = stats.at<int>(k, cv::CC_STAT_AREA) * a >= 0.25 * min_area;
+  }
+  cv::Mat out = cv::Mat::zeros(mask.size(), CV_8U);
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x)
+      if (keep[lab.at<int>(y, x)]) out.at<uchar>(y, x) = 255;
+  return out;
+}
+
+}  // namespace
+
+double ReferenceSurface::height(const Eigen::Vector3d& x) const {
+  double h = normal.dot(x) + d;
+  if (model == "quadratic") {
+    const Eigen::Vector3d q = x - origin;
+    const double u = q.dot(e1), v = q.dot(e2);
+    h -= quadric(0) + quadric(1) * u + quadric(2) * v + quadric(3) * u * u + quadric(4) * u * v + quadric(5) * v * v;
+  }
+  return h;
+}
+
+IndurationResult measureInduration(const stereo::DenseCloud& cloud, const IndurationOptions& o) {
+  o.validate();
+  IndurationResult res;
+  if (cloud.xyz.empty() || cloud.xyz.type() != CV_32FC3) {
+    res.warnings.push_back("empty point cloud: nothing to measure");
+    return res;
+  }
+  if (cloud.ray.size() != cloud.xyz.size() || cloud.ray.type() != CV_32FC3)
+    throw IndurationError("the cloud has no viewing ray per pixel (DenseCloud::ray): triangulate it with triangulateDisparity");
+  cv::Mat xyz = cloud.xyz.clone();
+  res.labels = cv::Mat(xyz.size(), CV_32S, cv::Scalar(0));
+  res.height_map = cv::Mat(xyz.size(), CV_32F, cv::Scalar(kNaN));
+  res.outliers_removed = removeOutliers(xyz, o.sor_std_ratio);
+  cv::Mat known_mask(xyz.size(), CV_8U);
+  for (int y = 0; y < xyz.rows; ++y)
+    for (int x = 0; x < xyz.cols; ++x) known_mask.at<uchar>(y, x) = known(xyz.at<cv::Vec3f>(y, x)) ? 255 : 0;
+  res.known_points = cv::countNonZero(known_mask);
+  if (res.known_points < 1000) {
+    res.warnings.push_back("too few surface points (" + std::to_string(res.known_points) +
+                           ") to fit a reference: check the dense matching (texture, overlap, working range)");
+    return res;
+  }
+
+  // ---- RANSAC start on a subsample
+  std::vector<Eigen::Vector3f> sample;
+  {
+    const int step = std::max(1, static_cast<int>(std::sqrt(res.known_points / 20000.0)));
+    for (int y = 0; y < xyz.rows; y += step)
+      for (int x = 0; x < xyz.cols; x += step) {
+        const cv::Vec3f& p = xyz.at<cv::Vec3f>(y, x);
+        if (known(p)) sample.emplace_back(p[0], p[1], p[2]);
+      }
+  }
+  Eigen::Vector4d plane;
+  int inliers = 0;
+  if (!ransacPlane(sample, o.ransac_threshold, &plane, &inliers)) {
+    res.warnings.push_back("no plane found in the surface points (RANSAC): no reference");
+    return res;
+  }
+  ReferenceSurface ref;
+  ref.normal = plane.head<3>();
+  ref.d = plane(3);
+  if (ref.d < 0) {
+    ref.normal = -ref.normal;
+    ref.d = -ref.d;
+  }
+  ref.model = "plane";
+
+  // ---- alternate: robust reference on the healthy points, plaque mask from the heights
+  cv::Mat plaque_mask = cv::Mat::zeros(xyz.size(), CV_8U);
+  const cv::Mat dil = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o.exclusion_margin_px + 1, 2 * o.exclusion_margin_px + 1));
+  cv::Mat hs;
+  double healthy_fraction = 1.0, threshold = o.min_height;
+  for (int it = 0; it < o.max_iterations; ++it) {
+    cv::Mat use = known_mask & ~plaque_mask;
+    healthy_fraction = cv::countNonZero(use) / static_cast<double>(res.known_points);
+    if (healthy_fraction < o.min_reference_fraction) break;
+    // the first pass measures against the RANSAC plane itself: a fit to every point would be pulled
+    // towards large plaques; later passes fit the healthy skin only
+    // (the quadratic model first fits all points robustly with a wider cut-off: a curved surface leaves a
+    // plane's band)
+    if (it == 0 && o.reference_model == "quadratic" &&
+        !fitReference(xyz, use, o.reference_model, o.fit_points, 3 * o.ransac_threshold, &ref))
+      break;
+    if (it > 0 && !fitReference(xyz, use, o.reference_model, o.fit_points, o.ransac_threshold, &ref)) break;
+    hs = smoothNaN(heights(xyz, ref), o.smoothing_px);
+    threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
+    // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
+    // bias the next fit downwards, which raises more pixels above the threshold, and so on
+    cv::Mat next;
+    cv::dilate(largeRegions(hs > threshold, cloud.ray, ref, o.min_area), next, dil);
+    const double changed = cv::countNonZero(next != plaque_mask) / static_cast<double>(res.known_points);
+    plaque_mask = next;
+    if (it > 0 && changed < 1e-4) break;
+  }
+  if (healthy_fraction < o.min_reference_fraction) {
+    res.warnings.push_back("no healthy skin left to fit the reference: only " +
+                           num(std::round(1000 * healthy_fraction) / 10) + " % of the points are not raised (minimum " +
+                           num(100 * o.min_reference_fraction) + " %); widen the region of interest to include skin around the plaques");
+    return res;
+  }
+  res.reference = ref;
+  res.reference_ok = true;
+  res.height_map = heights(xyz, ref);
+  hs = smoothFilled(res.height_map, o.smoothing_px, o.interior_margin_px);
+
+  // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
+  threshold = detectionThreshold(hs, known_mask & ~plaque_mask, o.min_height, o.ransac_threshold);
+  res.detection_threshold = threshold;
+  cv::Mat above = hs > threshold, lab, stats, cents;
+  const int n = cv::connectedComponentsWithStats(above, lab, stats, cents, 8, CV_32S);
+  std::vector<Plaque> plaques;
+  cv::Mat final_labels(xyz.size(), CV_32S, cv::Scalar(0));
+  for (int k = 1; k < n; ++k) {
+    const cv::Rect bb(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
+                      stats.at<int>(k, cv::CC_STAT_HEIGHT));
+    // median height of the core region
+    std::vector<float> hv;
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab.at<int>(y, x) == k && !std::isnan(res.height_map.at<float>(y, x))) hv.push_back(res.height_map.at<float>(y, x));
+    if (hv.size() < 10) continue;
+    std::nth_element(hv.begin(), hv.begin() + hv.size() / 2, hv.end());
+    const double median = hv[hv.size() / 2];
+    const double edge = std::max(threshold, o.edge_fraction * median);
+    // region at the edge threshold connected to the core, within a margin around the core's box
+    const int m = 4 * std::max(1, static_cast<int>(std::ceil(o.smoothing_px))) + 2 * o.exclusion_margin_px + 2;
+    const cv::Rect box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
+    cv::Mat region = hs(box) > edge;
+    cv::Mat rl;
+    const int rn = cv::connectedComponents(region, rl, 8, CV_32S);
+    std::vector<char> keep(rn, 0);
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab.at<int>(y, x) == k) keep[rl.at<int>(y - box.y, x - box.x)] = 1;
+    keep[0] = 0;
+    cv::Mat mask = cv::Mat::zeros(box.size(), CV_8U);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (keep[rl.at<int>(y, x)]) mask.at<uchar>(y, x) = 255;
+    // fill holes: background not reachable from the box border
+    cv::Mat flood;
+    cv::copyMakeBorder(mask, flood, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
+    cv::floodFill(flood, cv::Point(0, 0), 128);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (flood.at<uchar>(y + 1, x + 1) == 0) mask.at<uchar>(y, x) = 255;
+    // statistics: area and centroid over the whole plaque; heights over its interior (the plaque eroded by
+    // interior_margin_px: the matching window blurs the edge into a ramp, which would pull the mean down)
+    const cv::Mat A = footprint(cloud.ray, ref, box);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (final_labels.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // already in a larger neighbour
+    cv::Mat interior;
+    if (o.interior_margin_px > 0) {
+      cv::erode(mask, interior, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o.interior_margin_px + 1, 2 * o.interior_margin_px + 1)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+      if (cv::countNonZero(interior) < 10) interior = mask;  // too small to have an interior
+    } else {
+      interior = mask;
+    }
+    Plaque p;
+    double area = 0, sh = 0, sh2 = 0, ssig2 = 0;
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    std::vector<float> hk;
+    int px = 0, nc = 0;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x) {
+        if (!mask.at<uchar>(y, x)) continue;
+        ++px;
+        area += A.at<double>(y, x);
+        const float h = res.height_map.at<float>(y + box.y, x + box.x);
+        if (std::isnan(h)) continue;
+        const cv::Vec3f& q = xyz.at<cv::Vec3f>(y + box.y, x + box.x);
+        c += Eigen::Vector3d(q[0], q[1], q[2]);
+        ++nc;
+        if (!interior.at<uchar>(y, x)) continue;
+        hk.push_back(h);
+        sh += h;
+        sh2 += static_cast<double>(h) * h;
+        if (!cloud.sigma.empty()) {
+          const float s = cloud.sigma.at<float>(y + box.y, x + box.x);
+          const cv::Vec3f& r = cloud.ray.at<cv::Vec3f>(y + box.y, x + box.x);
+          const double cosi = std::fabs(ref.normal.x() * r[0] + ref.normal.y() * r[1] + ref.normal.z() * r[2]);
+          if (std::isfinite(s)) ssig2 += (s * cosi) * (s * cosi);
+        }
+      }
+    if (area < o.min_area || hk.size() < 10) continue;
+    {
+      // a region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an
+      // island of mismatches): its height above the reference means nothing
+      const int r1 = 2 * o.interior_margin_px, r2 = 4 * o.interior_margin_px;
+      // (in a frame padded by r2: beyond the image border counts as unknown)
+      cv::Mat full = cv::Mat::zeros(xyz.rows + 2 * r2, xyz.cols + 2 * r2, CV_8U), d1, d2, known_pad;
+      full(box + cv::Point(r2, r2)).setTo(255, mask);
+      cv::copyMakeBorder(known_mask, known_pad, r2, r2, r2, r2, cv::BORDER_CONSTANT, 0);
+      cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
+      cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));
+      const cv::Mat ring = d2 & ~d1;
+      const int ring_n = cv::countNonZero(ring), ring_known = cv::countNonZero(ring & known_pad);
+      const double mean_h = sh / static_cast<double>(hk.size());
+      if (ring_n == 0 || ring_known < 0.8 * ring_n) {
+        res.warnings.push_back("a raised region of " + num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
+                               std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
+                               ") was ignored: it lies at the edge of the measured surface (" +
+                               num(std::round(100.0 * ring_known / std::max(1, ring_n))) + " % of its surroundings known)");
+        continue;
+      }
+      if (mean_h > o.max_height) {
+        res.warnings.push_back("a region " + num(std::round(mean_h * 1e5) / 100) + " mm above the reference at pixel (" +
+                               std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
+                               ") was ignored: higher than max_height " + num(o.max_height * 1e3) + " mm (not skin)");
+        continue;
+      }
+    }
+    const double nk = static_cast<double>(hk.size());
+    p.area = area;
+    p.centroid = c / std::max(1, nc);
+    p.mean_height = sh / nk;
+    p.std_height = std::sqrt(std::max(0.0, sh2 / nk - p.mean_height * p.mean_height));
+    std::nth_element(hk.begin(), hk.begin() + static_cast<long>(0.99 * (nk - 1)), hk.end());
+    p.max_height = hk[static_cast<std::size_t>(0.99 * (nk - 1))];
+    p.mean_height_sigma = std::sqrt(ssig2) / nk;
+    p.pasi_class = pasiClass(p.mean_height, o.pasi_boundaries);
+    p.pixels = px;
+    p.bbox = box;
+    p.id = static_cast<int>(plaques.size()) + 1;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (mask.at<uchar>(y, x)) final_labels.at<int>(y + box.y, x + box.x) = p.id;
+    plaques.push_back(p);
+  }
+  // ids in order of decreasing area
+  std::vector<int> order(plaques.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return plaques[a].area > plaques[b].area; });
+  std::vector<int> new_id(plaques.size() + 1, 0);
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    new_id[plaques[order[i]].id] = static_cast<int>(i) + 1;
+    res.plaques.push_back(plaques[order[i]]);
+    res.plaques.back().id = static_cast<int>(i) + 1;
+  }
+  for (int y = 0; y < final_labels.rows; ++y)
+    for (int x = 0; x < final_labels.cols; ++x) {
+      int& l = final_labels.at<int>(y, x);
+      if (l) l = new_id[l];
+    }
+  res.labels = final_labels;
+  if (res.plaques.empty()) res.warnings.push_back("no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference");
+  return res;
+}
+
+}  // namespace induration
+}  // namespace skin3d

@@ -1,0 +1,527 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Dense matching: semi-global matching at a coarse level, then a coarse-to-fine local correlation fit.
+// See include/skin3d/stereo/dense_stereo.h for the method.
+#include "skin3d/stereo/dense_stereo.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "../common/text.h"
+
+namespace skin3d {
+namespace stereo {
+namespace {
+
+using common::num;
+using Clock = std::chrono::steady_clock;
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr double kMinCorrelation = 0.5;  // windowed normalised correlation below this = unknown
+
+double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+
+/** Grey float image in [0, 1]. */
+cv::Mat toGreyFloat(const cv::Mat& img) {
+  cv::Mat grey = img;
+  if (img.channels() == 3) cv::cvtColor(img, grey, cv::COLOR_BGR2GRAY);
+  else if (img.channels() == 4) cv::cvtColor(img, grey, cv::COLOR_BGRA2GRAY);
+  cv::Mat f;
+  grey.convertTo(f, CV_32F, img.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0);
+  return f;
+}
+
+/** Crop of `img` at `r` (may reach outside): outside pixels are 0. */
+cv::Mat paddedCrop(const cv::Mat& img, const cv::Rect& r) {
+  cv::Mat out(r.size(), img.type(), cv::Scalar::all(0));
+  const cv::Rect inside = r & cv::Rect(0, 0, img.cols, img.rows);
+  if (inside.area() > 0) img(inside).copyTo(out(inside - r.tl()));
+  return out;
+}
+
+/** Zero local mean, unit local contrast (Gaussian window of sigma s); eps keeps flat areas near 0. */
+cv::Mat normaliseLocal(const cv::Mat& img, double s) {
+  cv::Mat mean, d, var, out;
+  cv::GaussianBlur(img, mean, cv::Size(), s, s, cv::BORDER_REFLECT);
+  d = img - mean;
+  cv::GaussianBlur(d.mul(d), var, cv::Size(), s, s, cv::BORDER_REFLECT);
+  cv::sqrt(var + 4e-4, var);  // contrast floor 0.02: about 5x the sensor noise of an 8-bit image
+  cv::divide(d, var, out);
+  return out;
+}
+
+/** NaN-aware fill: holes take a Gaussian-weighted average of their known surroundings (for initial values only). */
+cv::Mat fillHoles(const cv::Mat& d) {
+  cv::Mat known = (d == d);  // false for NaN
+  cv::Mat v = d.clone();
+  v.setTo(0, ~known);
+  cv::Mat w;
+  known.convertTo(w, CV_32F, 1.0 / 255.0);
+  cv::Mat out = d.clone();
+  for (double s = 2; s < 4 * std::max(d.rows, d.cols); s *= 3) {
+    cv::Mat vs, ws;
+    cv::GaussianBlur(v, vs, cv::Size(), s, s, cv::BORDER_REPLICATE);
+    cv::GaussianBlur(w, ws, cv::Size(), s, s, cv::BORDER_REPLICATE);
+    bool remaining = false;
+    for (int y = 0; y < d.rows; ++y) {
+      float* o = out.ptr<float>(y);
+      const float* a = vs.ptr<float>(y);
+      const float* b = ws.ptr<float>(y);
+      for (int x = 0; x < d.cols; ++x) {
+        if (std::isnan(o[x])) {
+          if (b[x] > 1e-4f) o[x] = a[x] / b[x];
+          else remaining = true;
+        }
+      }
+    }
+    if (!remaining) break;
+  }
+  out.setTo(0, out != out);
+  return out;
+}
+
+int sgbmMode(const std::string& m) {
+  if (m == "sgbm") return cv::StereoSGBM::MODE_SGBM;
+  if (m == "hh") return cv::StereoSGBM::MODE_HH;
+  if (m == "sgbm_3way") return cv::StereoSGBM::MODE_SGBM_3WAY;
+  throw DenseStereoError("sgbm_mode '" + m + "' is not one of sgbm, hh, sgbm_3way");
+}
+
+void validate(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& o) {
+  if (left.empty() || right.empty()) throw DenseStereoError(std::string(left.empty() ? "left" : "right") + " image is empty");
+  if (left.size() != right.size())
+    throw DenseStereoError("left and right images differ in size (" + std::to_string(left.cols) + "x" +
+                           std::to_string(left.rows) + " vs " + std::to_string(right.cols) + "x" +
+                           std::to_string(right.rows) + ")");
+  if (left.type() != right.type()) throw DenseStereoError("left and right images differ in type");
+  if (left.depth() != CV_8U && left.depth() != CV_16U) throw DenseStereoError("images must be 8-bit or 16-bit");
+  if (left.channels() != 1 && left.channels() != 3 && left.channels() != 4)
+    throw DenseStereoError("images must be grey or colour (1, 3 or 4 channels)");
+  if (!std::isfinite(o.min_disparity) || !std::isfinite(o.max_disparity) || o.min_disparity >= o.max_disparity)
+    throw DenseStereoError("disparity range [" + num(o.min_disparity) + ", " + num(o.max_disparity) +
+                           "] px must be finite with min < max (set it, e.g. from disparityRangeForDepth)");
+  if (o.max_disparity - o.min_disparity > 8 * left.cols)
+    throw DenseStereoError("disparity range " + num(o.max_disparity - o.min_disparity) + " px is wider than 8 image widths");
+  if (o.block_size < 1 || o.block_size > 11 || o.block_size % 2 == 0)
+    throw DenseStereoError("block_size " + std::to_string(o.block_size) + " must be odd, 1 ... 11");
+  sgbmMode(o.sgbm_mode);
+  if (o.subpixel != "lk" && o.subpixel != "sgbm") throw DenseStereoError("subpixel '" + o.subpixel + "' is not lk or sgbm");
+  if (o.refine_window < 3 || o.refine_window % 2 == 0 || o.refine_window > 51)
+    throw DenseStereoError("refine_window " + std::to_string(o.refine_window) + " must be odd, 3 ... 51");
+  if (o.refine_iterations < 1 || o.refine_iterations > 20)
+    throw DenseStereoError("refine_iterations " + std::to_string(o.refine_iterations) + " must be 1 ... 20");
+  if (o.coarse_max_width < 64) throw DenseStereoError("coarse_max_width " + std::to_string(o.coarse_max_width) + " must be >= 64");
+  if (!(o.lr_max_diff >= 0) || !(o.refine_max_shift > 0) || !(o.max_sigma > 0) || !(o.min_texture >= 0) ||
+      o.uniqueness_ratio < 0 || o.speckle_window < 0 || !(o.speckle_range >= 0) || o.p1 < 0 || o.p2 < 0)
+    throw DenseStereoError("lr_max_diff, refine_max_shift, max_sigma, min_texture, uniqueness_ratio, speckle_* and p1/p2 "
+                           "must be >= 0 (refine_max_shift and max_sigma > 0)");
+  if (o.p1 > 0 && o.p2 > 0 && o.p2 <= o.p1) throw DenseStereoError("p2 must be larger than p1");
+}
+
+/**
+ * Bicubic resampling with the Catmull-Rom kernel (a = -0.5, the interpolating cubic of least phase error)
+ * at exact float positions. cv::remap's INTER_CUBIC uses a = -0.75 and quantises positions to 1/32 px:
+ * both bias a sub-pixel fit by a few hundredths of a pixel depending on the fractional disparity.
+ * Outside the image: 0.
+ */
+void remapCatmullRom(const cv::Mat& src, const cv::Mat& mapx, const cv::Mat& mapy, cv::Mat& dst) {
+  CV_Assert(src.type() == CV_32F && mapx.type() == CV_32F && mapy.size() == mapx.size());
+  dst.create(mapx.size(), CV_32F);
+  const int W = src.cols, H = src.rows;
+  cv::parallel_for_(cv::Range(0, mapx.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const float* mx = mapx.ptr<float>(y);
+      const float* my = mapy.ptr<float>(y);
+      float* out = dst.ptr<float>(y);
+      for (int x = 0; x < mapx.cols; ++x) {
+        const float fx = mx[x], fy = my[x];
+        const int ix = static_cast<int>(std::floor(fx)), iy = static_cast<int>(std::floor(fy));
+        if (ix < 1 || iy < 1 || ix >= W - 2 || iy >= H - 2) {
+          out[x] = 0.f;
+          continue;
+        }
+        const float tx = fx - ix, ty = fy - iy;
+        float wx[4], wy[4];
+        const float tx2 = tx * tx, tx3 = tx2 * tx, ty2 = ty * ty, ty3 = ty2 * ty;
+        wx[0] = 0.5f * (-tx3 + 2 * tx2 - tx);
+        wx[1] = 0.5f * (3 * tx3 - 5 * tx2 + 2);
+        wx[2] = 0.5f * (-3 * tx3 + 4 * tx2 + tx);
+        wx[3] = 0.5f * (tx3 - tx2);
+        wy[0] = 0.5f * (-ty3 + 2 * ty2 - ty);
+        wy[1] = 0.5f * (3 * ty3 - 5 * ty2 + 2);
+        wy[2] = 0.5f * (-3 * ty3 + 4 * ty2 + ty);
+        wy[3] = 0.5f * (ty3 - ty2);
+        float acc = 0.f;
+        for (int j = 0; j < 4; ++j) {
+          const float* row = src.ptr<float>(iy - 1 + j) + ix - 1;
+          acc += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
+        }
+        out[x] = acc;
+      }
+    }
+  });
+}
+
+/** Result of the local fit at one level. */
+struct Refined {
+  cv::Mat d, v;            // disparity (crop coordinates: x_l - x_r') and vertical shift
+  cv::Mat sigma, corr, texture;
+};
+
+/**
+ * Iterative local correlation fit: left L, right R (both normalised, same size), initial d and v.
+ * Model: L(x, y) = R(x - d, y + v). Each iteration resamples R (bicubic) at the current field.
+ */
+Refined refineLevel(const cv::Mat& L, const cv::Mat& R, cv::Mat d, cv::Mat v, int window, int iterations,
+                    bool fit_vertical, bool final_stats) {
+  const cv::Size win(window, window);
+  cv::Mat Rx, Ry, Lx, Ly;
+  cv::Sobel(R, Rx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);  // central difference, smoothed
+  cv::Sobel(R, Ry, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
+  cv::Sobel(L, Lx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
+  cv::Sobel(L, Ly, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
+  cv::Mat mapx(L.size(), CV_32F), mapy(L.size(), CV_32F);
+  cv::Mat Rw, Rxw, Ryw, e, a, b, saa, sab, sbb, sae, sbe;
+  const int big = std::max(3, 4 * window + 1) | 1;  // the vertical shift is a smooth field: averaged widely
+  for (int it = 0; it < iterations; ++it) {
+    for (int y = 0; y < L.rows; ++y) {
+      const float* dp = d.ptr<float>(y);
+      const float* vp = v.ptr<float>(y);
+      float* mx = mapx.ptr<float>(y);
+      float* my = mapy.ptr<float>(y);
+      for (int x = 0; x < L.cols; ++x) {
+        mx[x] = static_cast<float>(x) - dp[x];
+        my[x] = static_cast<float>(y) + vp[x];
+      }
+    }
+    remapCatmullRom(R, mapx, mapy, Rw);
+    remapCatmullRom(Rx, mapx, mapy, Rxw);
+    remapCatmullRom(Ry, mapx, mapy, Ryw);
+    e = L - Rw;
+    // Symmetric gradients (mean of both images): no first-order bias from using one image's gradient.
+    // L = Rw(x - delta, y + nu) ~ Rw - gx delta + gy nu  =>  e = a delta + b nu, a = -gx, b = gy.
+    a = -0.5 * (Lx + Rxw);
+    b = 0.5 * (Ly + Ryw);
+    cv::boxFilter(a.mul(a), saa, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    cv::boxFilter(a.mul(e), sae, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    if (fit_vertical) {
+      cv::boxFilter(a.mul(b), sab, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::boxFilter(b.mul(b), sbb, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::boxFilter(b.mul(e), sbe, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::Mat nu(L.size(), CV_32F);
+      for (int y = 0; y < L.rows; ++y) {
+        const float *p = saa.ptr<float>(y), *q = sab.ptr<float>(y), *r = sbb.ptr<float>(y), *s = sae.ptr<float>(y),
+                    *t = sbe.ptr<float>(y);
+        float* n = nu.ptr<float>(y);
+        for (int x = 0; x < L.cols; ++x) {
+          const float det = p[x] * r[x] - q[x] * q[x];
+          n[x] = det > 1e-8f ? (p[x] * t[x] - q[x] * s[x]) / det : 0.f;
+          n[x] = std::max(-0.5f, std::min(0.5f, n[x]));
+        }
+      }
+      cv::boxFilter(nu, nu, CV_32F, cv::Size(big, big), cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      v += nu;
+      // the horizontal fit given the smoothed vertical update
+      cv::boxFilter(a.mul(e - b.mul(nu)), sae, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    }
+    // Each window's estimate linearises around its neighbours' current values, so the window's answer is
+    // its a^2-weighted mean of d plus the update (not the pixel's own d plus the update: with a box window
+    // that would amplify high-frequency noise, whose box response is negative, every iteration).
+    cv::Mat sad;
+    cv::boxFilter(a.mul(a).mul(d), sad, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    for (int y = 0; y < L.rows; ++y) {
+      const float* p = saa.ptr<float>(y);
+      const float* s = sae.ptr<float>(y);
+      const float* m = sad.ptr<float>(y);
+      float* dp = d.ptr<float>(y);
+      for (int x = 0; x < L.cols; ++x) {
+        if (p[x] > 1e-8f) {
+          const float target = (m[x] + s[x]) / p[x];
+          dp[x] += std::max(-1.f, std::min(1.f, target - dp[x]));
+        }
+      }
+    }
+  }
+  Refined out;
+  out.d = d;
+  out.v = v;
+  if (final_stats) {
+    // Residual after the last update, normalised correlation and the Gauss-Newton sigma.
+    for (int y = 0; y < L.rows; ++y) {
+      const float* dp = d.ptr<float>(y);
+      const float* vp = v.ptr<float>(y);
+      float* mx = mapx.ptr<float>(y);
+      float* my = mapy.ptr<float>(y);
+      for (int x = 0; x < L.cols; ++x) {
+        mx[x] = static_cast<float>(x) - dp[x];
+        my[x] = static_cast<float>(y) + vp[x];
+      }
+    }
+    remapCatmullRom(R, mapx, mapy, Rw);
+    remapCatmullRom(Rx, mapx, mapy, Rxw);
+    e = L - Rw;
+    a = -0.5 * (Lx + Rxw);
+    cv::Mat see, sll, srr, slr;
+    cv::boxFilter(a.mul(a), saa, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    cv::boxFilter(e.mul(e), see, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    cv::boxFilter(L.mul(L), sll, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    cv::boxFilter(Rw.mul(Rw), srr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    cv::boxFilter(L.mul(Rw), slr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    const double n = static_cast<double>(window) * window;
+    out.sigma.create(L.size(), CV_32F);
+    out.corr.create(L.size(), CV_32F);
+    out.texture = saa;
+    for (int y = 0; y < L.rows; ++y) {
+      const float *p = saa.ptr<float>(y), *q = see.ptr<float>(y), *l = sll.ptr<float>(y), *r = srr.ptr<float>(y),
+                  *c = slr.ptr<float>(y);
+      float* sg = out.sigma.ptr<float>(y);
+      float* cr = out.corr.ptr<float>(y);
+      for (int x = 0; x < L.cols; ++x) {
+        sg[x] = p[x] > 1e-8f ? static_cast<float>(std::sqrt(q[x] / ((n - 1.0) * p[x]))) : kNaN;
+        const float den = std::sqrt(l[x] * r[x]);
+        cr[x] = den > 1e-8f ? c[x] / den : 0.f;
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& o) {
+  const auto t0 = Clock::now();
+  validate(left, right, o);
+  DisparityMap out;
+  const cv::Rect image(0, 0, left.cols, left.rows);
+  cv::Rect roi = o.roi.area() > 0 ? o.roi : image;
+  if (o.roi.width < 0 || o.roi.height < 0) throw DenseStereoError("roi has a negative size");
+  if ((roi & image).area() == 0)
+    throw DenseStereoError("roi (" + std::to_string(roi.x) + ", " + std::to_string(roi.y) + ", " +
+                           std::to_string(roi.width) + " x " + std::to_string(roi.height) + ") lies outside the " +
+                           std::to_string(left.cols) + "x" + std::to_string(left.rows) + " image");
+  if ((roi & image) != roi) {
+    out.warnings.push_back("roi clipped to the image");
+    roi &= image;
+  }
+  if (roi.width < 16 || roi.height < 16) throw DenseStereoError("roi is smaller than 16 x 16 px");
+  out.roi = roi;
+  out.disparity = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+  out.sigma = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+  out.vertical = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+
+  // ---- prepare: grey float crops; the right crop is shifted by the minimum disparity so that the
+  // crop disparity d_c = d - d_min lies in [0, range]; the left crop is extended leftwards by the range.
+  const int d_min = static_cast<int>(std::floor(o.min_disparity));
+  const int range = static_cast<int>(std::ceil(o.max_disparity)) - d_min;
+  const int margin_y = 8;
+  int levels = 0;
+  while ((roi.width >> levels) > o.coarse_max_width && levels < 6) ++levels;
+  out.coarse_scale = 1 << levels;
+  const int s = out.coarse_scale;
+  // SGBM searches [0, num_disp) at the coarse level and leaves the first num_disp columns unknown: the left
+  // crop starts num_disp * s columns before the roi.
+  const int num_disp = ((static_cast<int>(std::ceil(static_cast<double>(range) / s)) + 1 + 15) / 16) * 16;
+  const int pad = num_disp * s;
+  const cv::Rect lcrop(roi.x - pad, roi.y - margin_y, roi.width + pad, roi.height + 2 * margin_y);
+  const cv::Rect rcrop = lcrop - cv::Point(d_min, 0);
+  const cv::Mat lf = paddedCrop(toGreyFloat(left(image)), lcrop);
+  const cv::Mat rf = paddedCrop(toGreyFloat(right(image)), rcrop);
+  {
+    // Saturation: clipped pixels carry no texture.
+    const cv::Mat lr = toGreyFloat(left(roi)), rr = toGreyFloat(right(roi));
+    const double sl = cv::countNonZero(lr >= 0.995f) / static_cast<double>(roi.area());
+    const double sr = cv::countNonZero(rr >= 0.995f) / static_cast<double>(roi.area());
+    if (std::max(sl, sr) > 0.05)
+      out.warnings.push_back("saturated images: " + num(std::round(100 * sl)) + " % (left) and " +
+                             num(std::round(100 * sr)) + " % (right) of the roi at full scale");
+  }
+  std::vector<cv::Mat> pl{lf}, pr{rf};
+  for (int l = 1; l <= levels; ++l) {
+    cv::Mat a, b;
+    cv::pyrDown(pl.back(), a);
+    cv::pyrDown(pr.back(), b);
+    pl.push_back(a);
+    pr.push_back(b);
+  }
+  const auto t1 = Clock::now();
+
+  // ---- semi-global matching at the coarse level
+  const int bs = o.block_size;
+  auto sgbm = cv::StereoSGBM::create(0, num_disp, bs, o.p1 > 0 ? o.p1 : 8 * bs * bs, o.p2 > 0 ? o.p2 : 32 * bs * bs,
+                                     static_cast<int>(std::lround(o.lr_max_diff)), 0, o.uniqueness_ratio,
+                                     o.speckle_window, static_cast<int>(std::lround(o.speckle_range)), sgbmMode(o.sgbm_mode));
+  if (o.lr_max_diff <= 0) sgbm->setDisp12MaxDiff(-1);
+  cv::Mat l8, r8, d16, dc;
+  pl[levels].convertTo(l8, CV_8U, 255.0);
+  pr[levels].convertTo(r8, CV_8U, 255.0);
+  sgbm->compute(l8, r8, d16);
+  d16.convertTo(dc, CV_32F, 1.0 / 16.0);
+  dc.setTo(kNaN, d16 < 0);  // invalid: OpenCV marks (min_disparity - 1) * 16
+  const auto t2 = Clock::now();
+  const cv::Rect coarse_roi(pad / s, margin_y / s, std::max(1, roi.width / s), std::max(1, roi.height / s));
+  const cv::Rect coarse_roi_c = coarse_roi & cv::Rect(0, 0, dc.cols, dc.rows);
+  const double coarse_valid =
+      coarse_roi_c.area() > 0 ? cv::countNonZero(dc(coarse_roi_c) == dc(coarse_roi_c)) / static_cast<double>(coarse_roi_c.area())
+                              : 0.0;
+
+  cv::Mat d_full, v_full, sigma_full, valid_full;
+  if (coarse_valid < 0.02) {
+    // Nothing matched: say why.
+    cv::Mat gx;
+    cv::Sobel(pl[levels](coarse_roi_c), gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+    const double texture = cv::mean(gx.mul(gx))[0];
+    if (texture < 1e-5)
+      out.warnings.push_back("no texture: the left image is uniform in the roi (nothing to match)");
+    else
+      out.warnings.push_back("no overlap: under 2 % of the roi matched within the disparity range [" + num(o.min_disparity) +
+                             ", " + num(o.max_disparity) + "] px (do the images overlap? is the working depth range right?)");
+    out.timing.prepare = seconds(t0, t1);
+    out.timing.sgbm = seconds(t1, t2);
+    out.timing.total = seconds(t0, Clock::now());
+    return out;
+  }
+  cv::Mat coarse_known = (dc == dc);
+  if (o.subpixel == "sgbm") {
+    cv::resize(dc, d_full, lf.size(), 0, 0, cv::INTER_NEAREST);
+    d_full *= s;
+    cv::Mat known;
+    cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
+    valid_full = known;
+    // SGBM's parabola: typically 0.1-0.3 px at its level (pixel locking); a nominal 0.25 px, scaled
+    sigma_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0.25 * s));
+    v_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0));
+  } else {
+    // ---- coarse-to-fine local fit on normalised images
+    const double norm_sigma = 0.75 * o.refine_window;
+    cv::Mat d = fillHoles(dc), v = cv::Mat::zeros(dc.size(), CV_32F);
+    const cv::Mat d_sgm = d.clone();
+    Refined r;
+    for (int l = levels; l >= 0; --l) {
+      if (l < levels) {
+        cv::Mat du, vu;
+        cv::resize(d, du, pl[l].size(), 0, 0, cv::INTER_LINEAR);
+        cv::resize(v, vu, pl[l].size(), 0, 0, cv::INTER_LINEAR);
+        d = du * 2.0;
+        v = vu * 2.0;
+      }
+      const cv::Mat Ln = normaliseLocal(pl[l], norm_sigma), Rn = normaliseLocal(pr[l], norm_sigma);
+      r = refineLevel(Ln, Rn, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
+      d = r.d;
+      v = r.v;
+    }
+    d_full = d;
+    v_full = v;
+    sigma_full = r.sigma;
+    // validity: the semi-global value known (nearest), the fit close to it, enough texture, correlation, sigma
+    cv::Mat known, sgm_up;
+    cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
+    cv::resize(d_sgm, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
+    sgm_up *= s;
+    valid_full = known.clone();
+    const float max_shift = static_cast<float>(o.refine_max_shift * s);
+    for (int y = 0; y < lf.rows; ++y) {
+      uchar* vp = valid_full.ptr<uchar>(y);
+      const float* dp = d_full.ptr<float>(y);
+      const float* gp = sgm_up.ptr<float>(y);
+      const float* sg = r.sigma.ptr<float>(y);
+      const float* cr = r.corr.ptr<float>(y);
+      const float* tx = r.texture.ptr<float>(y);
+      for (int x = 0; x < lf.cols; ++x) {
+        if (!vp[x]) continue;
+        if (!(sg[x] <= o.max_sigma) || cr[x] < kMinCorrelation || tx[x] < o.min_texture) {
+          vp[x] = 0;  // the images do not look alike here, or there is nothing to fit
+        } else if (!(std::fabs(dp[x] - gp[x]) <= max_shift)) {
+          vp[x] = 0;  // the fit and the semi-global matcher disagree: one of them is wrong
+        }
+      }
+    }
+  }
+  const auto t3 = Clock::now();
+
+  // ---- back to image coordinates: d = d_c + d_min
+  const cv::Rect in_crop(pad, margin_y, roi.width, roi.height);
+  int known = 0;
+  for (int y = 0; y < roi.height; ++y) {
+    const float* dp = d_full.ptr<float>(y + in_crop.y) + in_crop.x;
+    const float* vp = v_full.ptr<float>(y + in_crop.y) + in_crop.x;
+    const float* sp = sigma_full.ptr<float>(y + in_crop.y) + in_crop.x;
+    const uchar* ok = valid_full.ptr<uchar>(y + in_crop.y) + in_crop.x;
+    float* od = out.disparity.ptr<float>(y + roi.y) + roi.x;
+    float* ov = out.vertical.ptr<float>(y + roi.y) + roi.x;
+    float* os = out.sigma.ptr<float>(y + roi.y) + roi.x;
+    for (int x = 0; x < roi.width; ++x) {
+      if (!ok[x]) continue;
+      od[x] = dp[x] + static_cast<float>(d_min);
+      ov[x] = vp[x];
+      os[x] = sp[x];
+      ++known;
+    }
+  }
+  out.valid_fraction = known / static_cast<double>(roi.area());
+  if (out.valid_fraction < 0.1)
+    out.warnings.push_back("little matched: " + num(std::round(1000 * out.valid_fraction) / 10) +
+                           " % of the roi has a disparity (texture, overlap, saturation or disparity range?)");
+  out.timing.prepare = seconds(t0, t1);
+  out.timing.sgbm = seconds(t1, t2);
+  out.timing.refine = seconds(t2, t3);
+  out.timing.total = seconds(t0, Clock::now());
+  return out;
+}
+
+std::pair<double, double> disparityRangeForDepth(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
+                                                 double z_min, double z_max) {
+  if (!(z_min > 0) || !(z_max > z_min))
+    throw DenseStereoError("working depth range [" + num(z_min) + ", " + num(z_max) + "] m must have 0 < z_min < z_max");
+  const double fx = left.P(0, 0);
+  if (!(fx > 0) || !(right.P(0, 0) > 0)) throw DenseStereoError("rectified projection P has no focal length");
+  const double fb = -right.P(0, 3);  // fx * B
+  if (!(fb > 0)) throw DenseStereoError("right P(0,3) = -fx B must be negative (a horizontal rectified pair, right camera on the right)");
+  if (std::fabs(right.P(1, 3)) > 1e-9 * std::max(1.0, fb))
+    throw DenseStereoError("right P(1,3) is not 0: a vertical rectified pair is not supported");
+  const double dc = left.P(0, 2) - right.P(0, 2);
+  return {fb / z_max + dc, fb / z_min + dc};
+}
+
+DenseCloud triangulateDisparity(const DisparityMap& map, const geometry::CameraInfo& left,
+                                const geometry::CameraInfo& right) {
+  if (map.disparity.empty() || map.disparity.type() != CV_32F) throw DenseStereoError("disparity map is empty");
+  if (left.width != map.disparity.cols || left.height != map.disparity.rows)
+    throw DenseStereoError("left camera_info is " + std::to_string(left.width) + "x" + std::to_string(left.height) +
+                           " but the disparity map is " + std::to_string(map.disparity.cols) + "x" +
+                           std::to_string(map.disparity.rows));
+  const double fx = left.P(0, 0), fy = left.P(1, 1), cx = left.P(0, 2), cy = left.P(1, 2);
+  if (!(fx > 0) || !(fy > 0)) throw DenseStereoError("left P has no focal length");
+  const double fb = -right.P(0, 3);
+  if (!(fb > 0)) throw DenseStereoError("right P(0,3) = -fx B must be negative (a horizontal rectified pair)");
+  const double dc = cx - right.P(0, 2);
+  const Eigen::Matrix3d Rt = left.R.transpose();  // rectified -> left optical
+  DenseCloud c;
+  c.xyz = cv::Mat(map.disparity.size(), CV_32FC3, cv::Scalar::all(kNaN));
+  c.sigma = cv::Mat(map.disparity.size(), CV_32F, cv::Scalar(kNaN));
+  c.ray = cv::Mat(map.disparity.size(), CV_32FC3);
+  const bool have_sigma = !map.sigma.empty();
+  for (int y = 0; y < map.disparity.rows; ++y) {
+    const float* dp = map.disparity.ptr<float>(y);
+    const float* sp = have_sigma ? map.sigma.ptr<float>(y) : nullptr;
+    cv::Vec3f* xp = c.xyz.ptr<cv::Vec3f>(y);
+    cv::Vec3f* rp = c.ray.ptr<cv::Vec3f>(y);
+    float* op = c.sigma.ptr<float>(y);
+    for (int x = 0; x < map.disparity.cols; ++x) {
+      const Eigen::Vector3d m((x - cx) / fx, (y - cy) / fy, 1.0);
+      const Eigen::Vector3d ray = Rt * m.normalized();
+      rp[x] = cv::Vec3f(static_cast<float>(ray.x()), static_cast<float>(ray.y()), static_cast<float>(ray.z()));
+      const double den = dp[x] - dc;
+      if (std::isnan(dp[x]) || !(den > 0)) continue;
+      const double z = fb / den;
+      const Eigen::Vector3d X = Rt * (m * z);
+      xp[x] = cv::Vec3f(static_cast<float>(X.x()), static_cast<float>(X.y()), static_cast<float>(X.z()));
+      if (sp && std::isfinite(sp[x])) op[x] = static_cast<float>(z / den * sp[x] * m.norm());
+    }
+  }
+  return c;
+}
+
+}  // namespace stereo
+}  // namespace skin3d

@@ -1,0 +1,424 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * @file bench_dense.cpp
+ * @brief Dense stereo timing per stage on a workpiece bag, side by side with plain cv::StereoSGBM (benchmark, not a test).
+ *
+ *   bench_dense --bag WORKPIECE.bag [--frames N] [--roi-mp MP] [--z-range ZMIN ZMAX] [--no-full]
+ *
+ * Reads the first N stereo pairs of a workpiece bag (make_dataset workpiece: stereo/{left,right}/image_raw and
+ * camera_info) into memory (bag I/O is not timed), and for each pair times
+ *   rectify      cv::remap of both raw images (skin3d::stereo::Rectifier, maps built once)
+ *   skin3d       computeDisparity's prepare / sgbm / refine stages (DisparityMap::timing), then triangulateDisparity
+ *   plain SGBM   cv::StereoSGBM in MODE_HH and MODE_SGBM_3WAY on the same rectified grey input and disparity range
+ *                (block 5, P1 = 8 * 25, P2 = 32 * 25, the rest OpenCV's defaults); for the region the SGBM input is
+ *                the region plus the columns the search needs (cropped, zero-padded outside the image).
+ * for the full-resolution pair and for regions of MP megapixels (default 1, the image's aspect ratio): one at the
+ * image centre and one centred on the textured part of the first left rectified image (the working area of a
+ * converged rig rectified with flags 0 can be far from the image centre). The disparity range comes from
+ * stereo::disparityRangeForDepth with z 0.18 ... 0.40 m. MODE_HH needs about W * H * D * 4 bytes: it is skipped
+ * (and the table says so) when that exceeds half of the available memory.
+ * Prints a Markdown table with the machine (CPU model, nproc, load), the date and the command.
+ * Exit codes: 0 ok, 1 the bag cannot be read or lacks images / camera_info, 2 bad command line.
+ */
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "conversions.h"  // src/nodelets: CameraInfo message -> core struct
+#include "skin3d/geometry/camera.h"
+#include "skin3d/stereo/dense_stereo.h"
+#include "skin3d/stereo/rectification.h"
+
+namespace {
+
+using namespace skin3d;
+using Clock = std::chrono::steady_clock;
+
+const char* kUsage =
+    "usage: bench_dense --bag WORKPIECE.bag [--frames N] [--roi-mp MP] [--z-range ZMIN ZMAX] [--no-full]\n"
+    "  --bag FILE        a workpiece bag (make_dataset workpiece): stereo/{left,right}/image_raw and camera_info\n"
+    "  --frames N        time the first N stereo pairs (default 1); the table gives the median per pair\n"
+    "  --roi-mp MP       size of the regions (image centre, textured area), megapixels (default 1; 0 = none)\n"
+    "  --z-range A B     working depths, m, for the disparity range (default 0.18 0.40)\n"
+    "  --no-full         skip the full-resolution runs (region only)\n"
+    "  -h, --help        this text\n";
+
+double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+
+/** Grey 8-bit cv::Mat of a mono8 / mono16 / bgr8 / rgb8 image message. */
+cv::Mat fromMsg(const sensor_msgs::Image& m) {
+  int type = 0, code = -1;
+  if (m.encoding == "mono8") {
+    type = CV_8UC1;
+  } else if (m.encoding == "mono16") {
+    type = CV_16UC1;
+  } else if (m.encoding == "bgr8") {
+    type = CV_8UC3;
+    code = cv::COLOR_BGR2GRAY;
+  } else if (m.encoding == "rgb8") {
+    type = CV_8UC3;
+    code = cv::COLOR_RGB2GRAY;
+  } else {
+    throw std::runtime_error("image encoding '" + m.encoding + "' not supported (mono8, mono16, bgr8, rgb8)");
+  }
+  const size_t row = static_cast<size_t>(m.width) * CV_ELEM_SIZE(type);
+  if (m.step < row || m.data.size() < static_cast<size_t>(m.step) * m.height)
+    throw std::runtime_error("image message with inconsistent step / data size");
+  const cv::Mat view(static_cast<int>(m.height), static_cast<int>(m.width), type, const_cast<uint8_t*>(m.data.data()),
+                     m.step);
+  cv::Mat out;
+  if (code < 0)
+    out = view.clone();
+  else
+    cv::cvtColor(view, out, code);
+  return out;
+}
+
+std::string cpuModel() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto p = line.find(':');
+      if (p != std::string::npos) return line.substr(line.find_first_not_of(" \t", p + 1));
+    }
+  return "unknown";
+}
+
+std::string loadAverage() {
+  std::ifstream f("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  if (!(f >> a >> b >> c)) return "unknown";
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(2) << a << ", " << b << ", " << c;
+  return os.str();
+}
+
+/** MemAvailable from /proc/meminfo, bytes (0 if unknown). */
+double availableMemory() {
+  std::ifstream f("/proc/meminfo");
+  std::string key;
+  double kb = 0;
+  std::string unit;
+  while (f >> key >> kb >> unit)
+    if (key == "MemAvailable:") return kb * 1024.0;
+  return 0;
+}
+
+std::string today() {
+  const std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M", std::localtime(&t));
+  return buf;
+}
+
+std::string fixed(double v, int digits) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(digits) << v;
+  return os.str();
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+/** A crop of `img` over `r`, zero outside the image. */
+cv::Mat paddedCrop(const cv::Mat& img, const cv::Rect& r) {
+  cv::Mat out(r.size(), img.type(), cv::Scalar::all(0));
+  const cv::Rect inside = r & cv::Rect(0, 0, img.cols, img.rows);
+  if (!inside.empty()) img(inside).copyTo(out(inside - r.tl()));
+  return out;
+}
+
+/** One row of the table: times in ms (median over the pairs), NaN = not applicable. */
+struct Row {
+  std::string input, method, note;
+  std::vector<double> prepare, sgbm, refine, total, triangulate, valid;
+};
+
+/**
+ * Plain StereoSGBM over `roi` of the left image with disparities [d_min, d_max]: both images cropped (the left one
+ * extended by the search width to the left, the right one shifted by floor(d_min)), so that the matcher sees
+ * exactly what it needs. Fills prepare (crop), sgbm (compute), total and the valid fraction over the ROI.
+ */
+void plainSgbm(const cv::Mat& left, const cv::Mat& right, const cv::Rect& roi, double d_min, double d_max, int mode,
+               Row* row) {
+  const int block = 5;
+  const int shift = static_cast<int>(std::floor(d_min));
+  const int num = ((static_cast<int>(std::ceil(d_max)) - shift + 1 + 15) / 16) * 16;
+  const auto t0 = Clock::now();
+  const cv::Rect lr(roi.x - num, roi.y, roi.width + num, roi.height);
+  const cv::Mat l = paddedCrop(left, lr), r = paddedCrop(right, lr - cv::Point(shift, 0));
+  const auto t1 = Clock::now();
+  cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(0, num, block, 8 * block * block, 32 * block * block);
+  sgbm->setMode(mode);
+  cv::Mat raw;
+  sgbm->compute(l, r, raw);
+  const auto t2 = Clock::now();
+  const cv::Mat d = raw(cv::Rect(num, 0, roi.width, roi.height));
+  row->prepare.push_back(ms(t0, t1));
+  row->sgbm.push_back(ms(t1, t2));
+  row->total.push_back(ms(t0, t2));
+  row->valid.push_back(static_cast<double>(cv::countNonZero(d >= 0)) / d.total());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string bag_path;
+  long frames_wanted = 1;
+  double roi_mp = 1.0, z_min = 0.18, z_max = 0.40;
+  bool full = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    char* end = nullptr;
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      return 0;
+    } else if (a == "--bag" && has_value) {
+      bag_path = argv[++i];
+    } else if (a == "--frames" && has_value) {
+      frames_wanted = std::strtol(argv[++i], &end, 10);
+      if (!end || *end || frames_wanted < 1) {
+        std::cerr << "bench_dense: --frames must be a positive integer (got '" << argv[i] << "')\n" << kUsage;
+        return 2;
+      }
+    } else if (a == "--roi-mp" && has_value) {
+      roi_mp = std::strtod(argv[++i], &end);
+      if (!end || *end || !(roi_mp >= 0) || !std::isfinite(roi_mp)) {
+        std::cerr << "bench_dense: --roi-mp must be a number >= 0 (got '" << argv[i] << "')\n" << kUsage;
+        return 2;
+      }
+    } else if (a == "--z-range" && i + 2 < argc) {
+      char* e2 = nullptr;
+      z_min = std::strtod(argv[i + 1], &end);
+      z_max = std::strtod(argv[i + 2], &e2);
+      if (!end || *end || !e2 || *e2 || !(z_min > 0 && z_min < z_max)) {
+        std::cerr << "bench_dense: --z-range needs 0 < ZMIN < ZMAX in metres (got '" << argv[i + 1] << "' '"
+                  << argv[i + 2] << "')\n"
+                  << kUsage;
+        return 2;
+      }
+      i += 2;
+    } else if (a == "--no-full") {
+      full = false;
+    } else {
+      std::cerr << "bench_dense: unknown or incomplete argument '" << a << "'\n" << kUsage;
+      return 2;
+    }
+  }
+  if (bag_path.empty()) {
+    std::cerr << "bench_dense: --bag is required\n" << kUsage;
+    return 2;
+  }
+  if (!full && roi_mp <= 0) {
+    std::cerr << "bench_dense: --no-full with --roi-mp 0 leaves nothing to run\n" << kUsage;
+    return 2;
+  }
+
+  // Read the pairs (matched by stamp) and the first camera_info of each side.
+  std::vector<std::pair<cv::Mat, cv::Mat>> frames;
+  geometry::CameraInfo li, ri;
+  bool have_li = false, have_ri = false;
+  try {
+    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+    const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw",
+                                             "stereo/left/camera_info", "stereo/right/camera_info"};
+    rosbag::View view(bag, rosbag::TopicQuery(topics));
+    std::map<ros::Time, std::pair<cv::Mat, cv::Mat>> pending;
+    for (const rosbag::MessageInstance& m : view) {
+      if (static_cast<long>(frames.size()) >= frames_wanted && have_li && have_ri) break;
+      std::string topic = m.getTopic();
+      if (!topic.empty() && topic[0] == '/') topic = topic.substr(1);
+      if (topic == "stereo/left/camera_info" && !have_li) {
+        li = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
+        have_li = true;
+      } else if (topic == "stereo/right/camera_info" && !have_ri) {
+        ri = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
+        have_ri = true;
+      } else if ((topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") &&
+                 static_cast<long>(frames.size()) < frames_wanted) {
+        const auto img = m.instantiate<sensor_msgs::Image>();
+        auto& p = pending[img->header.stamp];
+        (topic == "stereo/left/image_raw" ? p.first : p.second) = fromMsg(*img);
+        if (!p.first.empty() && !p.second.empty()) {
+          frames.push_back(p);
+          pending.erase(img->header.stamp);
+        }
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dense: cannot read " << bag_path << ": " << e.what() << "\n";
+    return 1;
+  }
+  if (frames.empty() || !have_li || !have_ri) {
+    std::cerr << "bench_dense: " << bag_path
+              << " has no stereo/{left,right}/image_raw pairs with equal stamps or no stereo/{left,right}/camera_info\n";
+    return 1;
+  }
+  const cv::Size size = frames[0].first.size();
+  if (li.width != size.width || li.height != size.height) {
+    std::cerr << "bench_dense: camera_info size " << li.width << "x" << li.height << " differs from the images' "
+              << size.width << "x" << size.height << "\n";
+    return 1;
+  }
+
+  std::pair<double, double> range;
+  try {
+    range = stereo::disparityRangeForDepth(li, ri, z_min, z_max);
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dense: " << e.what() << "\n";
+    return 1;
+  }
+  // Central region of roi_mp megapixels with the image's aspect ratio.
+  const double scale = std::min(1.0, std::sqrt(roi_mp * 1e6 / size.area()));
+  const cv::Size rs(static_cast<int>(std::lround(size.width * scale)), static_cast<int>(std::lround(size.height * scale)));
+  const cv::Rect roi((size.width - rs.width) / 2, (size.height - rs.height) / 2, rs.width, rs.height);
+
+  struct Input {
+    std::string name;
+    cv::Rect roi;
+  };
+  std::vector<Input> inputs;
+  if (full) inputs.push_back({"full " + std::to_string(size.width) + "x" + std::to_string(size.height), cv::Rect()});
+  if (roi_mp > 0) {
+    inputs.push_back({"image centre " + std::to_string(roi.width) + "x" + std::to_string(roi.height), roi});
+    // A strongly converged rig rectified with flags 0 may put the working area far from the image centre: a
+    // second region of the same size centred on the textured part of the first left rectified image.
+    try {
+      const cv::Mat left = stereo::Rectifier(li)(frames[0].first);
+      cv::Mat small, f, mean, sq;
+      const double k = std::max(1.0, size.width / 512.0);
+      cv::resize(left, small, cv::Size(), 1.0 / k, 1.0 / k, cv::INTER_AREA);
+      small.convertTo(f, CV_32F);
+      cv::boxFilter(f, mean, CV_32F, cv::Size(7, 7));
+      cv::boxFilter(f.mul(f), sq, CV_32F, cv::Size(7, 7));
+      const cv::Mat stddev_sq = sq - mean.mul(mean);
+      const cv::Mat textured = stddev_sq > 8.0 * 8.0;  // grey levels
+      const cv::Moments mo = cv::moments(textured, true);
+      if (mo.m00 > 0) {
+        const cv::Point2d c(k * mo.m10 / mo.m00, k * mo.m01 / mo.m00);
+        cv::Rect t(static_cast<int>(std::lround(c.x - roi.width / 2.0)),
+                   static_cast<int>(std::lround(c.y - roi.height / 2.0)), roi.width, roi.height);
+        t.x = std::clamp(t.x, 0, size.width - t.width);
+        t.y = std::clamp(t.y, 0, size.height - t.height);
+        inputs.push_back({"textured area " + std::to_string(t.width) + "x" + std::to_string(t.height) + " at (" +
+                              std::to_string(t.x) + ", " + std::to_string(t.y) + ")",
+                          t});
+      } else {
+        std::cerr << "bench_dense: no textured area found in the first left image: no second region\n";
+      }
+    } catch (const std::exception& e) {
+      std::cerr << "bench_dense: " << e.what() << "\n";
+      return 1;
+    }
+  }
+
+  const int num = ((static_cast<int>(std::ceil(range.second)) - static_cast<int>(std::floor(range.first)) + 1 + 15) / 16) * 16;
+  std::vector<double> rectify_ms;
+  std::vector<Row> rows;
+  std::vector<std::string> warnings;
+  try {
+    const stereo::Rectifier lr(li), rr(ri);
+    for (const Input& in : inputs) {
+      Row sk{in.name, "skin3d (sgbm_3way + lk)", "", {}, {}, {}, {}, {}, {}};
+      Row hh{in.name, "StereoSGBM HH", "", {}, {}, {}, {}, {}, {}};
+      Row w3{in.name, "StereoSGBM 3WAY", "", {}, {}, {}, {}, {}, {}};
+      const cv::Rect area = in.roi.empty() ? cv::Rect(0, 0, size.width, size.height) : in.roi;
+      // MODE_HH keeps the cost and the aggregated cost of every matched pixel and disparity (2 x int16).
+      const double hh_bytes = 4.0 * area.width * area.height * num;
+      const bool run_hh = hh_bytes < 0.5 * availableMemory();
+      if (!run_hh)
+        hh.note = "skipped: needs " + fixed(hh_bytes / 1e9, 1) + " GB (> half of the available " +
+                  fixed(availableMemory() / 1e9, 1) + " GB)";
+      for (const auto& f : frames) {
+        std::cerr << "bench_dense: " << in.name << " ..." << std::endl;
+        const auto t0 = Clock::now();
+        const cv::Mat left = lr(f.first), right = rr(f.second);
+        const auto t1 = Clock::now();
+        if (&in == &inputs.front()) rectify_ms.push_back(ms(t0, t1));  // the same work for every input
+
+        stereo::DenseStereoOptions opt;
+        opt.min_disparity = range.first;
+        opt.max_disparity = range.second;
+        opt.roi = in.roi;
+        const stereo::DisparityMap map = stereo::computeDisparity(left, right, opt);
+        const auto t2 = Clock::now();
+        const stereo::DenseCloud cloud = stereo::triangulateDisparity(map, li, ri);
+        const auto t3 = Clock::now();
+        sk.prepare.push_back(1e3 * map.timing.prepare);
+        sk.sgbm.push_back(1e3 * map.timing.sgbm);
+        sk.refine.push_back(1e3 * map.timing.refine);
+        sk.total.push_back(1e3 * map.timing.total);
+        sk.triangulate.push_back(ms(t2, t3));
+        sk.valid.push_back(map.valid_fraction);
+        sk.note = "coarse level 1/" + std::to_string(map.coarse_scale);
+        for (const std::string& w : map.warnings) warnings.push_back(in.name + ": " + w);
+
+        std::cerr << "bench_dense: " << in.name << " plain StereoSGBM ..." << std::endl;
+        plainSgbm(left, right, area, range.first, range.second, cv::StereoSGBM::MODE_SGBM_3WAY, &w3);
+        if (run_hh) plainSgbm(left, right, area, range.first, range.second, cv::StereoSGBM::MODE_HH, &hh);
+      }
+      rows.push_back(sk);
+      rows.push_back(w3);
+      rows.push_back(hh);
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dense: " << e.what() << "\n";
+    return 1;
+  }
+
+  const long nproc = sysconf(_SC_NPROCESSORS_ONLN);
+  std::string cmd;
+  for (int i = 0; i < argc; ++i) cmd += (i ? " " : "") + std::string(i ? argv[i] : "bench_dense");
+  auto cell = [](const std::vector<double>& v, int digits) {
+    return v.empty() ? std::string("—") : fixed(median(v), digits);
+  };
+  std::cout << "# Dense stereo benchmark\n\n"
+            << "- date: " << today() << "\n"
+            << "- machine: " << nproc << " cores (nproc), " << cpuModel() << ", OpenCV " << CV_VERSION << " with "
+            << cv::getNumThreads() << " threads; load average at the end " << loadAverage() << "\n"
+            << "- command: `" << cmd << "`\n"
+            << "- bag: " << bag_path << ", " << frames.size() << " stereo pair(s) of " << size.width << "x"
+            << size.height << " (median over the pairs; no warm-up run)\n"
+            << "- disparity range for z " << fixed(z_min, 2) << " ... " << fixed(z_max, 2) << " m: "
+            << fixed(range.first, 1) << " ... " << fixed(range.second, 1) << " px (plain SGBM: " << num
+            << " disparities)\n"
+            << "- rectify (remap of both raw images): " << cell(rectify_ms, 0) << " ms per pair\n\n";
+  std::cout << "| input | method | prepare ms | sgbm ms | refine ms | disparity total ms | triangulate ms | valid % | "
+               "note |\n|---|---|---:|---:|---:|---:|---:|---:|---|\n";
+  for (const Row& r : rows) {
+    const bool ran = !r.total.empty();
+    std::cout << "| " << r.input << " | " << r.method << " | " << (ran ? cell(r.prepare, 0) : "—") << " | "
+              << (ran ? cell(r.sgbm, 0) : "—") << " | " << cell(r.refine, 0) << " | " << cell(r.total, 0) << " | "
+              << cell(r.triangulate, 0) << " | " << (ran ? fixed(100 * median(r.valid), 1) : "—") << " | " << r.note
+              << " |\n";
+  }
+  std::cout << "\nplain SGBM: block 5, P1 = 200, P2 = 800, other parameters OpenCV's defaults (no left-right check, "
+               "no speckle filter), 1/16 px; its prepare = cropping the region plus the search width; valid = "
+               "pixels of the region with a disparity.\n";
+  for (const std::string& w : warnings) std::cout << "- warning: " << w << "\n";
+  return 0;
+}

@@ -1,0 +1,159 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * process_bag --induration: every stereo pair of an image bag through rectification, dense matching and the
+ * induration measurement (the same core calls as the dense_stereo and induration nodelets). Writes
+ * induration.yaml (every frame + the repeatability over frames), height_map.png and surface.ply of the
+ * last frame (and, for checking the matcher, its disparity.tiff / disparity_sigma.tiff in px, height_map.tiff
+ * in m and left_rect.png), and prints a per-plaque table in mm.
+ */
+#include "process_bag_induration.h"
+
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+
+#include "conversions.h"  // src/nodelets
+#include "skin3d/induration/induration.h"
+#include "skin3d/induration/induration_config.h"
+#include "skin3d/induration/induration_io.h"
+#include "skin3d/stereo/dense_stereo.h"
+#include "skin3d/stereo/rectification.h"
+
+namespace skin3d {
+namespace tools {
+
+int runInduration(const IndurationRun& a) {
+  induration::PipelineOptions opt;
+  for (const auto& c : a.configs) induration::applyPipelineOptions(&opt, c);
+  for (const auto& kv : a.sets) induration::setPipelineOption(&opt, kv.first, kv.second);
+  opt.validate();
+
+  rosbag::Bag bag;
+  try {
+    bag.open(a.bag, rosbag::bagmode::Read);
+  } catch (const std::exception& e) {
+    throw std::invalid_argument("cannot open bag '" + a.bag + "': " + e.what());
+  }
+  const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                                           "stereo/right/camera_info"};
+  rosbag::View view(bag, rosbag::TopicQuery(topics));
+  std::unique_ptr<stereo::Rectifier> rect_l, rect_r;
+  geometry::CameraInfo info_l, info_r;
+  bool have_l = false, have_r = false;
+  std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l, pending_r;
+  std::vector<induration::FrameRecord> records;
+  stereo::DenseCloud last_cloud;
+  cv::Mat last_left, last_disparity, last_sigma;
+  int bad = 0;
+  std::filesystem::create_directories(a.out);
+
+  auto process = [&](const sensor_msgs::Image& left, const sensor_msgs::Image& right) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const cv::Mat L = (*rect_l)(ros_conv::toMono8(left));
+    const cv::Mat R = (*rect_r)(ros_conv::toMono8(right));
+    stereo::DenseStereoOptions d = opt.dense;
+    const auto range = stereo::disparityRangeForDepth(info_l, info_r, opt.z_min, opt.z_max);
+    d.min_disparity = range.first;
+    d.max_disparity = range.second;
+    const stereo::DisparityMap map = stereo::computeDisparity(L, R, d);
+    const stereo::DenseCloud cloud = stereo::triangulateDisparity(map, info_l, info_r);
+    induration::FrameRecord rec;
+    rec.stamp = left.header.stamp.toSec();
+    rec.result = induration::measureInduration(cloud, opt.induration);
+    for (const auto& w : map.warnings) rec.result.warnings.insert(rec.result.warnings.begin(), "dense stereo: " + w);
+    rec.valid_fraction = map.valid_fraction;
+    rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (!a.quiet) {
+      std::printf("frame %zu (t = %.3f s): %.1f %% matched, reference RMS %.4f mm, %zu plaques, %.1f s "
+                  "(sgbm %.1f s, refine %.1f s)\n",
+                  records.size() + 1, rec.stamp, 100 * map.valid_fraction, rec.result.reference.rms * 1e3,
+                  rec.result.plaques.size(), rec.seconds, map.timing.sgbm, map.timing.refine);
+      for (const auto& w : rec.result.warnings) std::printf("  warning: %s\n", w.c_str());
+      std::fflush(stdout);
+    }
+    records.push_back(rec);
+    last_cloud = cloud;
+    last_left = L;
+    last_disparity = map.disparity;
+    last_sigma = map.sigma;
+  };
+
+  int pairs = 0;
+  for (const rosbag::MessageInstance& mi : view) {
+    const std::string& topic = mi.getTopic();
+    if (topic == "stereo/left/camera_info" && !have_l) {
+      info_l = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
+      rect_l = std::make_unique<stereo::Rectifier>(info_l);
+      have_l = true;
+    } else if (topic == "stereo/right/camera_info" && !have_r) {
+      info_r = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
+      rect_r = std::make_unique<stereo::Rectifier>(info_r);
+      have_r = true;
+    } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
+      const auto img = mi.instantiate<sensor_msgs::Image>();
+      (topic == "stereo/left/image_raw" ? pending_l : pending_r)[img->header.stamp] = img;
+    }
+    while (have_l && have_r && !pending_l.empty() && !pending_r.empty()) {
+      if (a.frames >= 0 && pairs >= a.frames) break;
+      const ros::Time t = std::max(pending_l.begin()->first, pending_r.begin()->first);
+      const auto li = pending_l.find(t), ri = pending_r.find(t);
+      if (li == pending_l.end() || ri == pending_r.end()) {
+        auto& older = pending_l.begin()->first < t ? pending_l : pending_r;
+        older.erase(older.begin());
+        continue;
+      }
+      const auto left = li->second, right = ri->second;
+      pending_l.erase(pending_l.begin(), std::next(li));
+      pending_r.erase(pending_r.begin(), std::next(ri));
+      ++pairs;
+      try {
+        process(*left, *right);
+      } catch (const std::exception& e) {
+        ++bad;
+        std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", left->header.stamp.toSec(), e.what());
+      }
+    }
+  }
+  if (records.empty())
+    throw std::invalid_argument("no stereo pair of '" + a.bag + "' could be measured (" + std::to_string(pairs) +
+                                " pairs, " + std::to_string(bad) + " dropped; the bag needs stereo/{left,right}/image_raw and camera_info)");
+
+  // ---- results (also when only some frames worked)
+  const std::string yaml = a.out + "/induration.yaml";
+  induration::writeInduration(yaml, records, opt.induration, "stereo_left_optical_frame", a.bag);
+  const auto& last = records.back().result;
+  if (!last.height_map.empty()) {
+    const cv::Mat img = induration::heightMapImage(last.height_map, last.labels, last.plaques);
+    if (!cv::imwrite(a.out + "/height_map.png", img)) throw std::runtime_error("cannot write " + a.out + "/height_map.png");
+  }
+  induration::writeSurfacePly(a.out + "/surface.ply", last_cloud, last_left, a.ply_step);
+  // the last frame's matching, for checking the matcher: disparity and its sigma (px, NaN unknown), left image
+  if (!cv::imwrite(a.out + "/disparity.tiff", last_disparity) || !cv::imwrite(a.out + "/disparity_sigma.tiff", last_sigma) ||
+      !cv::imwrite(a.out + "/left_rect.png", last_left))
+    throw std::runtime_error("cannot write the disparity images to " + a.out);
+  if (!last.height_map.empty() && !cv::imwrite(a.out + "/height_map.tiff", last.height_map))
+    throw std::runtime_error("cannot write " + a.out + "/height_map.tiff");
+  if (!a.quiet) {
+    std::printf("\n%zu frame(s), %d dropped. Last frame, heights above the healthy-skin reference (mm):\n",
+                records.size(), bad);
+    std::printf("| plaque | centroid x y z (mm, left optical) | area (mm²) | mean | max (p99) | std | PASI |\n"
+                "|---|---|---|---|---|---|---|\n");
+    for (const auto& p : last.plaques)
+      std::printf("| %d | %.1f %.1f %.1f | %.1f | %.3f | %.3f | %.3f | %d |\n", p.id, 1e3 * p.centroid.x(),
+                  1e3 * p.centroid.y(), 1e3 * p.centroid.z(), 1e6 * p.area, 1e3 * p.mean_height, 1e3 * p.max_height,
+                  1e3 * p.std_height, p.pasi_class);
+    std::printf("results: %s (induration.yaml, height_map.png, surface.ply)\n", a.out.c_str());
+  }
+  return 0;
+}
+
+}  // namespace tools
+}  // namespace skin3d

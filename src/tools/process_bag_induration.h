@@ -1,0 +1,26 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// process_bag's induration mode (process_bag_induration.cpp).
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace skin3d {
+namespace tools {
+
+struct IndurationRun {
+  std::string bag, out;
+  std::vector<std::string> configs;                          //!< PipelineOptions YAML files, in order
+  std::vector<std::pair<std::string, std::string>> sets;     //!< key=value overrides
+  int frames = -1;
+  int ply_step = 2;                                          //!< surface.ply: every ply_step-th pixel
+  bool quiet = false;
+};
+
+/** @brief Measures every pair; writes the results. @throws std::invalid_argument (bad data/config),
+ *  std::runtime_error (cannot write). */
+int runInduration(const IndurationRun& run);
+
+}  // namespace tools
+}  // namespace skin3d

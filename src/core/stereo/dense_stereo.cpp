@@ -20,6 +20,8 @@ using common::num;
 using Clock = std::chrono::steady_clock;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr double kMinCorrelation = 0.5;  // windowed normalised correlation below this = unknown
+constexpr int kMaxCoarseDisparities = 640;  // deeper searches are done at a coarser level
+constexpr float kMinSigma = 0.005f;  // px: floor of the reported sigma (interpolation and 8-bit quantisation)
 
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
@@ -33,11 +35,14 @@ cv::Mat toGreyFloat(const cv::Mat& img) {
   return f;
 }
 
-/** Crop of `img` at `r` (may reach outside): outside pixels are 0. */
+/** Crop of `img` at `r` (may reach outside): outside, the border pixels are replicated (a zero fill would
+ *  put a step edge there, which the matcher would take for texture). */
 cv::Mat paddedCrop(const cv::Mat& img, const cv::Rect& r) {
-  cv::Mat out(r.size(), img.type(), cv::Scalar::all(0));
   const cv::Rect inside = r & cv::Rect(0, 0, img.cols, img.rows);
-  if (inside.area() > 0) img(inside).copyTo(out(inside - r.tl()));
+  cv::Mat out;
+  if (inside.area() == 0) return cv::Mat(r.size(), img.type(), cv::Scalar::all(0));
+  cv::copyMakeBorder(img(inside), out, inside.y - r.y, r.br().y - inside.br().y, inside.x - r.x, r.br().x - inside.br().x,
+                     cv::BORDER_REPLICATE);
   return out;
 }
 
@@ -172,9 +177,10 @@ struct Refined {
 
 /**
  * Iterative local correlation fit: left L, right R (both normalised, same size), initial d and v.
- * Model: L(x, y) = R(x - d, y + v). Each iteration resamples R (bicubic) at the current field.
+ * Model: L(x, y) = R(x + x_offset - d, y + v) (L may be a crop of the left image starting x_offset columns
+ * in). Each iteration resamples R (Catmull-Rom) at the current field.
  */
-Refined refineLevel(const cv::Mat& L, const cv::Mat& R, cv::Mat d, cv::Mat v, int window, int iterations,
+Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d, cv::Mat v, int window, int iterations,
                     bool fit_vertical, bool final_stats) {
   const cv::Size win(window, window);
   cv::Mat Rx, Ry, Lx, Ly;
@@ -192,7 +198,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, cv::Mat d, cv::Mat v, in
       float* mx = mapx.ptr<float>(y);
       float* my = mapy.ptr<float>(y);
       for (int x = 0; x < L.cols; ++x) {
-        mx[x] = static_cast<float>(x) - dp[x];
+        mx[x] = static_cast<float>(x + x_offset) - dp[x];
         my[x] = static_cast<float>(y) + vp[x];
       }
     }
@@ -255,7 +261,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, cv::Mat d, cv::Mat v, in
       float* mx = mapx.ptr<float>(y);
       float* my = mapy.ptr<float>(y);
       for (int x = 0; x < L.cols; ++x) {
-        mx[x] = static_cast<float>(x) - dp[x];
+        mx[x] = static_cast<float>(x + x_offset) - dp[x];
         my[x] = static_cast<float>(y) + vp[x];
       }
     }
@@ -317,7 +323,8 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   const int range = static_cast<int>(std::ceil(o.max_disparity)) - d_min;
   const int margin_y = 8;
   int levels = 0;
-  while ((roi.width >> levels) > o.coarse_max_width && levels < 6) ++levels;
+  // halve until the roi is at most coarse_max_width wide and the search at most kMaxCoarseDisparities deep
+  while (((roi.width >> levels) > o.coarse_max_width || (range >> levels) > kMaxCoarseDisparities) && levels < 6) ++levels;
   out.coarse_scale = 1 << levels;
   const int s = out.coarse_scale;
   // SGBM searches [0, num_disp) at the coarse level and leaves the first num_disp columns unknown: the left
@@ -367,13 +374,21 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
                               : 0.0;
 
   cv::Mat d_full, v_full, sigma_full, valid_full;
-  if (coarse_valid < 0.02) {
+  // texture of the left roi at the coarse level (normalised gradient energy; a uniform image has ~0)
+  double texture = 0;
+  {
+    cv::Mat gx, gy;
+    const cv::Mat a = pl[levels](coarse_roi_c);
+    cv::Sobel(a, gx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+    cv::Sobel(a, gy, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+    texture = cv::mean(gx.mul(gx) + gy.mul(gy))[0];
+  }
+  const bool no_texture = texture < 1e-6;
+  const std::string no_texture_msg = "no texture: the left image is uniform in the roi (nothing to match)";
+  if (coarse_valid < 0.02 || no_texture) {
     // Nothing matched: say why.
-    cv::Mat gx;
-    cv::Sobel(pl[levels](coarse_roi_c), gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
-    const double texture = cv::mean(gx.mul(gx))[0];
-    if (texture < 1e-5)
-      out.warnings.push_back("no texture: the left image is uniform in the roi (nothing to match)");
+    if (no_texture)
+      out.warnings.push_back(no_texture_msg);
     else
       out.warnings.push_back("no overlap: under 2 % of the roi matched within the disparity range [" + num(o.min_disparity) +
                              ", " + num(o.max_disparity) + "] px (do the images overlap? is the working depth range right?)");
@@ -383,6 +398,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     return out;
   }
   cv::Mat coarse_known = (dc == dc);
+  int c0 = 0;  // first crop column of the fine-level maps below
   if (o.subpixel == "sgbm") {
     cv::resize(dc, d_full, lf.size(), 0, 0, cv::INTER_NEAREST);
     d_full *= s;
@@ -393,21 +409,26 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     sigma_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0.25 * s));
     v_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0));
   } else {
-    // ---- coarse-to-fine local fit on normalised images
+    // ---- coarse-to-fine local fit on normalised images, over the roi plus a margin only (the columns
+    // before it were needed by the semi-global search, not here)
     const double norm_sigma = 0.75 * o.refine_window;
-    cv::Mat d = fillHoles(dc), v = cv::Mat::zeros(dc.size(), CV_32F);
-    const cv::Mat d_sgm = d.clone();
+    const int margin_x = s * (2 * o.refine_window + 4);
+    c0 = std::max(0, (pad - margin_x) / s * s);
+    cv::Mat d = fillHoles(dc)(cv::Rect(c0 / s, 0, dc.cols - c0 / s, dc.rows)).clone();
+    cv::Mat v = cv::Mat::zeros(d.size(), CV_32F);
     Refined r;
     for (int l = levels; l >= 0; --l) {
+      const int cl = c0 >> l;
+      const cv::Rect crop(cl, 0, pl[l].cols - cl, pl[l].rows);
       if (l < levels) {
         cv::Mat du, vu;
-        cv::resize(d, du, pl[l].size(), 0, 0, cv::INTER_LINEAR);
-        cv::resize(v, vu, pl[l].size(), 0, 0, cv::INTER_LINEAR);
+        cv::resize(d, du, crop.size(), 0, 0, cv::INTER_LINEAR);
+        cv::resize(v, vu, crop.size(), 0, 0, cv::INTER_LINEAR);
         d = du * 2.0;
         v = vu * 2.0;
       }
-      const cv::Mat Ln = normaliseLocal(pl[l], norm_sigma), Rn = normaliseLocal(pr[l], norm_sigma);
-      r = refineLevel(Ln, Rn, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
+      const cv::Mat Ln = normaliseLocal(pl[l], norm_sigma)(crop), Rn = normaliseLocal(pr[l], norm_sigma);
+      r = refineLevel(Ln, Rn, cl, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
       d = r.d;
       v = r.v;
     }
@@ -417,18 +438,20 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     // validity: the semi-global value known (nearest), the fit close to it, enough texture, correlation, sigma
     cv::Mat known, sgm_up;
     cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
-    cv::resize(d_sgm, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
-    sgm_up *= s;
-    valid_full = known.clone();
+    cv::resize(dc, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
+    const cv::Rect fine(c0, 0, lf.cols - c0, lf.rows);
+    known = known(fine).clone();
+    sgm_up = sgm_up(fine) * s;
+    valid_full = known;
     const float max_shift = static_cast<float>(o.refine_max_shift * s);
-    for (int y = 0; y < lf.rows; ++y) {
+    for (int y = 0; y < valid_full.rows; ++y) {
       uchar* vp = valid_full.ptr<uchar>(y);
       const float* dp = d_full.ptr<float>(y);
       const float* gp = sgm_up.ptr<float>(y);
       const float* sg = r.sigma.ptr<float>(y);
       const float* cr = r.corr.ptr<float>(y);
       const float* tx = r.texture.ptr<float>(y);
-      for (int x = 0; x < lf.cols; ++x) {
+      for (int x = 0; x < valid_full.cols; ++x) {
         if (!vp[x]) continue;
         if (!(sg[x] <= o.max_sigma) || cr[x] < kMinCorrelation || tx[x] < o.min_texture) {
           vp[x] = 0;  // the images do not look alike here, or there is nothing to fit
@@ -440,22 +463,30 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   }
   const auto t3 = Clock::now();
 
-  // ---- back to image coordinates: d = d_c + d_min
-  const cv::Rect in_crop(pad, margin_y, roi.width, roi.height);
+  // ---- back to image coordinates: d = d_c + d_min. A pixel whose matching window reaches beyond either
+  // image (the crops are zero-padded there) is unknown.
+  const cv::Rect in_crop(pad - c0, margin_y, roi.width, roi.height);
+  const int half = (o.subpixel == "lk" ? o.refine_window : o.block_size) / 2;
   int known = 0;
   for (int y = 0; y < roi.height; ++y) {
+    const int yi = y + roi.y;
+    if (yi < half || yi >= left.rows - half) continue;
     const float* dp = d_full.ptr<float>(y + in_crop.y) + in_crop.x;
     const float* vp = v_full.ptr<float>(y + in_crop.y) + in_crop.x;
     const float* sp = sigma_full.ptr<float>(y + in_crop.y) + in_crop.x;
     const uchar* ok = valid_full.ptr<uchar>(y + in_crop.y) + in_crop.x;
-    float* od = out.disparity.ptr<float>(y + roi.y) + roi.x;
-    float* ov = out.vertical.ptr<float>(y + roi.y) + roi.x;
-    float* os = out.sigma.ptr<float>(y + roi.y) + roi.x;
+    float* od = out.disparity.ptr<float>(yi) + roi.x;
+    float* ov = out.vertical.ptr<float>(yi) + roi.x;
+    float* os = out.sigma.ptr<float>(yi) + roi.x;
     for (int x = 0; x < roi.width; ++x) {
       if (!ok[x]) continue;
-      od[x] = dp[x] + static_cast<float>(d_min);
+      const int xi = x + roi.x;
+      const float d = dp[x] + static_cast<float>(d_min);
+      const float xr = static_cast<float>(xi) - d;
+      if (xi < half || xi >= left.cols - half || !(xr >= half) || !(xr <= left.cols - 1 - half)) continue;
+      od[x] = d;
       ov[x] = vp[x];
-      os[x] = sp[x];
+      os[x] = std::max(sp[x], kMinSigma);
       ++known;
     }
   }

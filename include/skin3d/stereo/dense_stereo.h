@@ -18,8 +18,10 @@
  *     value, or whose window has too little texture (`min_texture`), too large a sigma (`max_sigma`) or a
  *     normalised correlation below 0.5 (the images do not look alike there), becomes unknown.
  *  4. Uncertainty: sigma_d^2 = s^2 / sum(w * Ix^2) over the window, s^2 the window's residual variance
- *     (the Gauss-Newton covariance of the fitted shift). Neighbouring pixels share most of their window,
- *     so their errors are correlated over about the window size.
+ *     (the Gauss-Newton covariance of the fitted shift), inflated by (1 + phi)/(1 - phi) per direction with
+ *     phi = the product of the lag-1 correlations of residual and gradient in the window (an AR(1) model of
+ *     the correlated samples). Neighbouring pixels share most of their window, so their errors are
+ *     correlated over about the window size.
  *
  * Disparity convention: d = x_left - x_right in rectified pixels (a rig rectified with flags 0 has a
  * different cx per camera, so d may be negative; depth Z = fx B / (d - (cx_left - cx_right))).
@@ -66,7 +68,7 @@ struct DenseStereoOptions {
   int refine_window = 11;        //!< odd window of the local fit, px at each level
   int refine_iterations = 3;     //!< Gauss-Newton iterations per pyramid level (more at full resolution: +1)
   double refine_max_shift = 1.0; //!< px at the semi-global level: a fit farther than this from its value = unknown
-  double max_sigma = 0.5;        //!< px: pixels with a larger disparity sigma are unknown
+  double max_sigma = 1.0;        //!< px: pixels with a larger disparity sigma are unknown
   double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };

@@ -275,6 +275,21 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     cv::boxFilter(L.mul(L), sll, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
     cv::boxFilter(Rw.mul(Rw), srr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
     cv::boxFilter(L.mul(Rw), slr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    // Neighbouring residuals (and gradients) are correlated (optics blur, interpolation), so the window holds
+    // fewer independent samples than pixels. With lag-1 correlations rho_e of the residual and rho_a of the
+    // gradient, an AR(1) model of their product phi = rho_e rho_a inflates the variance by
+    // (1 + phi) / (1 - phi) per direction.
+    auto lag1 = [&](const cv::Mat& m, bool horizontal) {
+      cv::Mat shifted, prod, num, den;
+      const cv::Mat kernel = horizontal ? (cv::Mat_<float>(1, 3) << 0, 0, 1) : (cv::Mat_<float>(3, 1) << 0, 0, 1);
+      cv::filter2D(m, shifted, CV_32F, kernel, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);  // m(x + 1) or m(y + 1)
+      cv::boxFilter(m.mul(shifted), num, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::boxFilter(m.mul(m), den, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::Mat r;
+      cv::divide(num, den + 1e-12f, r);
+      return r;
+    };
+    const cv::Mat phx = lag1(e, true).mul(lag1(a, true)), phy = lag1(e, false).mul(lag1(a, false));
     const double n = static_cast<double>(window) * window;
     out.sigma.create(L.size(), CV_32F);
     out.corr.create(L.size(), CV_32F);
@@ -282,10 +297,15 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     for (int y = 0; y < L.rows; ++y) {
       const float *p = saa.ptr<float>(y), *q = see.ptr<float>(y), *l = sll.ptr<float>(y), *r = srr.ptr<float>(y),
                   *c = slr.ptr<float>(y);
+      const float* fx = phx.ptr<float>(y);
+      const float* fy = phy.ptr<float>(y);
       float* sg = out.sigma.ptr<float>(y);
       float* cr = out.corr.ptr<float>(y);
       for (int x = 0; x < L.cols; ++x) {
-        sg[x] = p[x] > 1e-8f ? static_cast<float>(std::sqrt(q[x] / ((n - 1.0) * p[x]))) : kNaN;
+        const double ax = std::min(0.95, std::max(0.0, static_cast<double>(fx[x])));
+        const double ay = std::min(0.95, std::max(0.0, static_cast<double>(fy[x])));
+        const double inflate = (1 + ax) / (1 - ax) * (1 + ay) / (1 - ay);
+        sg[x] = p[x] > 1e-8f ? static_cast<float>(std::sqrt(inflate * q[x] / ((n - 1.0) * p[x]))) : kNaN;
         const float den = std::sqrt(l[x] * r[x]);
         cr[x] = den > 1e-8f ? c[x] / den : 0.f;
       }

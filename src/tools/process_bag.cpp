@@ -40,6 +40,7 @@
 
 #include "conversions.h"  // src/nodelets
 #include "process_bag_induration.h"
+#include "stereo_pairs.h"
 #include "skin3d/geometry/sphere_fit.h"
 #include "skin3d/slam/results.h"
 #include "skin3d/slam/slam_config.h"
@@ -129,10 +130,7 @@ int run(const Args& a) {
   std::vector<slam::StampedPose> trajectory, truth;
   std::vector<slam::StateRow> rows;
   std::unique_ptr<stereo::StereoFeatureMatcher> matcher;
-  std::unique_ptr<stereo::Rectifier> rect_l, rect_r;
-  geometry::CameraInfo info_l, info_r;
-  bool have_l = false, have_r = false;
-  std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l, pending_r;
+  tools::StereoPairs pairs_in;
   stereo::FeatureOptions fo;
   fo.type = stereo::parseFeatureType(a.features);
   const stereo::TriangulateOptions to;
@@ -174,40 +172,20 @@ int run(const Args& a) {
     } else if (topic == "stereo/landmarks") {
       const auto l = mi.instantiate<skin3d::LandmarkArray>();
       frame(secs(l->header.stamp), ros_conv::fromMsg(*l));
-    } else if (topic == "stereo/left/camera_info" && !have_l) {
-      info_l = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
-      rect_l = std::make_unique<stereo::Rectifier>(info_l);
-      have_l = true;
-    } else if (topic == "stereo/right/camera_info" && !have_r) {
-      info_r = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
-      rect_r = std::make_unique<stereo::Rectifier>(info_r);
-      have_r = true;
-    } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
-      // Pair left and right by stamp (a bag may store either first, and the camera_info after the images).
-      const auto img = mi.instantiate<sensor_msgs::Image>();
-      (topic == "stereo/left/image_raw" ? pending_l : pending_r)[img->header.stamp] = img;
+    } else {
+      pairs_in.add(mi);
     }
     // Process the complete pairs in stamp order once both camera_infos are known.
-    while (have_l && have_r && !pending_l.empty() && !pending_r.empty()) {
-      const ros::Time t = std::max(pending_l.begin()->first, pending_r.begin()->first);
-      const auto li = pending_l.find(t), ri = pending_r.find(t);
-      if (li == pending_l.end() || ri == pending_r.end()) {
-        // The older one has no partner: drop it.
-        (pending_l.begin()->first < t ? pending_l : pending_r).erase((pending_l.begin()->first < t ? pending_l : pending_r).begin());
-        continue;
-      }
-      const sensor_msgs::Image::ConstPtr left = li->second, right = ri->second;
-      pending_l.erase(pending_l.begin(), std::next(li));
-      pending_r.erase(pending_r.begin(), std::next(ri));
-      if (a.frames >= 0 && frames >= a.frames) break;
+    sensor_msgs::Image::ConstPtr left, right;
+    while (!(a.frames >= 0 && frames >= a.frames) && pairs_in.next(&left, &right)) {
       if (!matcher) {
-        fo.disparity_offset = info_l.P(0, 2) - info_r.P(0, 2);
+        fo.disparity_offset = pairs_in.leftInfo().P(0, 2) - pairs_in.rightInfo().P(0, 2);
         matcher = std::make_unique<stereo::StereoFeatureMatcher>(fo);
       }
       try {
-        const cv::Mat L = (*rect_l)(ros_conv::toMono8(*left));
-        const cv::Mat R = (*rect_r)(ros_conv::toMono8(*right));
-        const auto lms = stereo::triangulateMatches(info_l, info_r, matcher->process(L, R), to);
+        const cv::Mat L = pairs_in.rectifyLeft(*left);
+        const cv::Mat R = pairs_in.rectifyRight(*right);
+        const auto lms = stereo::triangulateMatches(pairs_in.leftInfo(), pairs_in.rightInfo(), matcher->process(L, R), to);
         std::vector<slam::Measurement> m;
         for (const auto& l : lms) m.push_back({l.position, l.covariance, l.descriptor, l.strength});
         frame(secs(left->header.stamp), m);
@@ -230,7 +208,7 @@ int run(const Args& a) {
               {"frames_dropped", std::to_string(bad_frames)},
               {"gyro", opt.use_gyro ? "true" : "false"},
               {"known_map", a.known_map.empty() ? "false" : "true"},
-              {"front_end", have_l ? a.features : "none (landmark bag)"},
+              {"front_end", pairs_in.haveLeftInfo() ? a.features : "none (landmark bag)"},
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);

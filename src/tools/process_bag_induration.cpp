@@ -26,6 +26,7 @@
 #include "skin3d/induration/induration_io.h"
 #include "skin3d/stereo/dense_stereo.h"
 #include "skin3d/stereo/rectification.h"
+#include "stereo_pairs.h"
 
 namespace skin3d {
 namespace tools {
@@ -45,10 +46,7 @@ int runInduration(const IndurationRun& a) {
   const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
                                            "stereo/right/camera_info"};
   rosbag::View view(bag, rosbag::TopicQuery(topics));
-  std::unique_ptr<stereo::Rectifier> rect_l, rect_r;
-  geometry::CameraInfo info_l, info_r;
-  bool have_l = false, have_r = false;
-  std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l, pending_r;
+  StereoPairs pairs_in;
   std::vector<induration::FrameRecord> records;
   stereo::DenseCloud last_cloud;
   cv::Mat last_left, last_disparity, last_sigma;
@@ -57,8 +55,10 @@ int runInduration(const IndurationRun& a) {
 
   auto process = [&](const sensor_msgs::Image& left, const sensor_msgs::Image& right) {
     const auto t0 = std::chrono::steady_clock::now();
-    const cv::Mat L = (*rect_l)(ros_conv::toMono8(left));
-    const cv::Mat R = (*rect_r)(ros_conv::toMono8(right));
+    const cv::Mat L = pairs_in.rectifyLeft(left);
+    const cv::Mat R = pairs_in.rectifyRight(right);
+    const geometry::CameraInfo& info_l = pairs_in.leftInfo();
+    const geometry::CameraInfo& info_r = pairs_in.rightInfo();
     stereo::DenseStereoOptions d = opt.dense;
     const auto range = stereo::disparityRangeForDepth(info_l, info_r, opt.z_min, opt.z_max);
     d.min_disparity = range.first;
@@ -88,31 +88,9 @@ int runInduration(const IndurationRun& a) {
 
   int pairs = 0;
   for (const rosbag::MessageInstance& mi : view) {
-    const std::string& topic = mi.getTopic();
-    if (topic == "stereo/left/camera_info" && !have_l) {
-      info_l = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
-      rect_l = std::make_unique<stereo::Rectifier>(info_l);
-      have_l = true;
-    } else if (topic == "stereo/right/camera_info" && !have_r) {
-      info_r = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
-      rect_r = std::make_unique<stereo::Rectifier>(info_r);
-      have_r = true;
-    } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
-      const auto img = mi.instantiate<sensor_msgs::Image>();
-      (topic == "stereo/left/image_raw" ? pending_l : pending_r)[img->header.stamp] = img;
-    }
-    while (have_l && have_r && !pending_l.empty() && !pending_r.empty()) {
-      if (a.frames >= 0 && pairs >= a.frames) break;
-      const ros::Time t = std::max(pending_l.begin()->first, pending_r.begin()->first);
-      const auto li = pending_l.find(t), ri = pending_r.find(t);
-      if (li == pending_l.end() || ri == pending_r.end()) {
-        auto& older = pending_l.begin()->first < t ? pending_l : pending_r;
-        older.erase(older.begin());
-        continue;
-      }
-      const auto left = li->second, right = ri->second;
-      pending_l.erase(pending_l.begin(), std::next(li));
-      pending_r.erase(pending_r.begin(), std::next(ri));
+    pairs_in.add(mi);
+    sensor_msgs::Image::ConstPtr left, right;
+    while (!(a.frames >= 0 && pairs >= a.frames) && pairs_in.next(&left, &right)) {
       ++pairs;
       try {
         process(*left, *right);

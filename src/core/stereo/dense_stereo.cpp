@@ -191,7 +191,8 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   cv::Mat mapx(L.size(), CV_32F), mapy(L.size(), CV_32F);
   cv::Mat Rw, Rxw, Ryw, e, a, b, saa, sab, sbb, sae, sbe;
   const int big = std::max(3, 4 * window + 1) | 1;  // the vertical shift is a smooth field: averaged widely
-  for (int it = 0; it < iterations; ++it) {
+  // where each left pixel looks in the right image under the current field
+  auto fillMaps = [&]() {
     for (int y = 0; y < L.rows; ++y) {
       const float* dp = d.ptr<float>(y);
       const float* vp = v.ptr<float>(y);
@@ -202,6 +203,9 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
         my[x] = static_cast<float>(y) + vp[x];
       }
     }
+  };
+  for (int it = 0; it < iterations; ++it) {
+    fillMaps();
     remapCatmullRom(R, mapx, mapy, Rw);
     remapCatmullRom(Rx, mapx, mapy, Rxw);
     remapCatmullRom(Ry, mapx, mapy, Ryw);
@@ -255,16 +259,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   out.v = v;
   if (final_stats) {
     // Residual after the last update, normalised correlation and the Gauss-Newton sigma.
-    for (int y = 0; y < L.rows; ++y) {
-      const float* dp = d.ptr<float>(y);
-      const float* vp = v.ptr<float>(y);
-      float* mx = mapx.ptr<float>(y);
-      float* my = mapy.ptr<float>(y);
-      for (int x = 0; x < L.cols; ++x) {
-        mx[x] = static_cast<float>(x + x_offset) - dp[x];
-        my[x] = static_cast<float>(y) + vp[x];
-      }
-    }
+    fillMaps();
     remapCatmullRom(R, mapx, mapy, Rw);
     remapCatmullRom(Rx, mapx, mapy, Rxw);
     e = L - Rw;

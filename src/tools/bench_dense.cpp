@@ -64,35 +64,6 @@ const char* kUsage =
 
 double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
 
-/** Grey 8-bit cv::Mat of a mono8 / mono16 / bgr8 / rgb8 image message. */
-cv::Mat fromMsg(const sensor_msgs::Image& m) {
-  int type = 0, code = -1;
-  if (m.encoding == "mono8") {
-    type = CV_8UC1;
-  } else if (m.encoding == "mono16") {
-    type = CV_16UC1;
-  } else if (m.encoding == "bgr8") {
-    type = CV_8UC3;
-    code = cv::COLOR_BGR2GRAY;
-  } else if (m.encoding == "rgb8") {
-    type = CV_8UC3;
-    code = cv::COLOR_RGB2GRAY;
-  } else {
-    throw std::runtime_error("image encoding '" + m.encoding + "' not supported (mono8, mono16, bgr8, rgb8)");
-  }
-  const size_t row = static_cast<size_t>(m.width) * CV_ELEM_SIZE(type);
-  if (m.step < row || m.data.size() < static_cast<size_t>(m.step) * m.height)
-    throw std::runtime_error("image message with inconsistent step / data size");
-  const cv::Mat view(static_cast<int>(m.height), static_cast<int>(m.width), type, const_cast<uint8_t*>(m.data.data()),
-                     m.step);
-  cv::Mat out;
-  if (code < 0)
-    out = view.clone();
-  else
-    cv::cvtColor(view, out, code);
-  return out;
-}
-
 std::string cpuModel() {
   std::ifstream f("/proc/cpuinfo");
   std::string line;
@@ -262,7 +233,7 @@ int main(int argc, char** argv) {
                  static_cast<long>(frames.size()) < frames_wanted) {
         const auto img = m.instantiate<sensor_msgs::Image>();
         auto& p = pending[img->header.stamp];
-        (topic == "stereo/left/image_raw" ? p.first : p.second) = fromMsg(*img);
+        (topic == "stereo/left/image_raw" ? p.first : p.second) = ros_conv::toMono8(*img);
         if (!p.first.empty() && !p.second.empty()) {
           frames.push_back(p);
           pending.erase(img->header.stamp);

@@ -8,8 +8,9 @@
  * (stereo/{left,right}/image_raw + camera_info) through the front end (rectify, features, MMSE
  * triangulation) first; imu/data feeds the gyroscope with --gyro. Writes the results directory of
  * DESIGN.md: trajectory.tum, map.ply, sphere_fit.yaml (robust sphere fit of the map), state.csv (per-frame
- * filter state), summary.yaml (with the absolute trajectory error when the bag has ground_truth/pose), and
- * ground_truth.tum.
+ * filter state), rig_covariance.csv (per-frame rig covariance), summary.yaml (with the absolute trajectory
+ * error when the bag has ground_truth/pose), ground_truth.tum, and parameters.yaml (the command line and every
+ * parameter's effective value). Progress on stderr (every 2 s on a terminal, every 10 % in a log).
  *
  * --known-map MAP.csv: thesis experiment 1, the landmarks are known (make_dataset globe-landmarks writes
  * FILE.map.csv beside the bag: positions and descriptors); association by descriptor + Mahalanobis gate.
@@ -40,6 +41,7 @@
 
 #include "conversions.h"  // src/nodelets
 #include "process_bag_induration.h"
+#include "run_info.h"
 #include "stereo_pairs.h"
 #include "skin3d/geometry/sphere_fit.h"
 #include "skin3d/slam/results.h"
@@ -73,6 +75,7 @@ struct Args {
   std::vector<std::pair<std::string, std::string>> sets;
   bool gyro = false, quiet = false, induration = false;
   int frames = -1;
+  std::vector<std::string> command_line;
 };
 
 double secs(const ros::Time& t) { return t.toSec(); }
@@ -84,24 +87,6 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   p.q = Eigen::Quaterniond(m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z);
   return p;
 }
-
-class Progress {
- public:
-  Progress(bool quiet) : quiet_(quiet), t0_(std::chrono::steady_clock::now()) {}
-  void tick(int k, const slam::FrameStats& s, int pool) {
-    if (quiet_) return;
-    const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
-    if (el - last_ < 2.0) return;
-    last_ = el;
-    std::fprintf(stderr, "  frame %d (t = %.1f s): %d measured, %d associated, %d used, %d new, pool %d; %.1f frames/s\n",
-                 k, s.time, s.measurements, s.associated, s.used, s.initialised, pool, k / el);
-  }
-
- private:
-  bool quiet_;
-  std::chrono::steady_clock::time_point t0_;
-  double last_ = 0.0;
-};
 
 int run(const Args& a) {
   slam::SlamOptions opt;
@@ -135,7 +120,11 @@ int run(const Args& a) {
   fo.type = stereo::parseFeatureType(a.features);
   const stereo::TriangulateOptions to;
   int frames = 0, bad_frames = 0;
-  Progress progress(a.quiet);
+  // frames to expect, for the progress line: landmark messages, or else left images
+  int expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/landmarks")).size());
+  if (expected == 0) expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/left/image_raw")).size());
+  if (a.frames >= 0 && a.frames < expected) expected = a.frames;
+  tools::Progress progress(expected, a.quiet);
   const auto t_start = std::chrono::steady_clock::now();
   double frame_seconds = 0.0;
 
@@ -154,7 +143,10 @@ int run(const Args& a) {
     trajectory.push_back({t, x.p, x.q});
     rows.push_back(slam::stateRow(slam, s));
     ++frames;
-    progress.tick(frames, s, slam.pool().used());
+    char detail[160];
+    std::snprintf(detail, sizeof detail, "t = %.1f s: %d measured, %d associated, %d used, %d new, %d in the pool",
+                  s.time, s.measurements, s.associated, s.used, s.initialised, slam.pool().used());
+    progress.tick(frames, detail);
   };
 
   for (const rosbag::MessageInstance& mi : view) {
@@ -195,6 +187,7 @@ int run(const Args& a) {
       }
     }
   }
+  progress.done();
   if (frames == 0) throw std::invalid_argument("no frames in '" + a.bag + "' (no stereo/landmarks or image pairs)");
 
   // ---- results
@@ -208,10 +201,12 @@ int run(const Args& a) {
               {"frames_dropped", std::to_string(bad_frames)},
               {"gyro", opt.use_gyro ? "true" : "false"},
               {"known_map", a.known_map.empty() ? "false" : "true"},
-              {"front_end", pairs_in.haveLeftInfo() ? a.features : "none (landmark bag)"},
+              {"front_end", matcher ? a.features : "none (landmark bag)"},
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);
+  tools::writeParameters(a.out + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml", a.command_line,
+                         slam::slamOptionKeys(), [&](const std::string& k) { return slam::getSlamOption(opt, k); });
   if (!a.quiet) std::cout << text << std::flush;
   return 0;
 }
@@ -220,6 +215,7 @@ int run(const Args& a) {
 
 int main(int argc, char** argv) {
   Args a;
+  a.command_line.assign(argv, argv + argc);
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     auto value = [&]() -> std::string {
@@ -269,6 +265,7 @@ int main(int argc, char** argv) {
       r.sets = a.sets;
       r.frames = a.frames;
       r.quiet = a.quiet;
+      r.command_line = a.command_line;
       return tools::runInduration(r);
     }
     return run(a);

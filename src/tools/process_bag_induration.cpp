@@ -7,6 +7,7 @@
  * in m and left_rect.png), and prints a per-plaque table in mm.
  */
 #include "process_bag_induration.h"
+#include "run_info.h"
 
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -46,6 +47,8 @@ int runInduration(const IndurationRun& a) {
   const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
                                            "stereo/right/camera_info"};
   rosbag::View view(bag, rosbag::TopicQuery(topics));
+  int expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/left/image_raw")).size());
+  if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   StereoPairs pairs_in;
   std::vector<induration::FrameRecord> records;
   stereo::DenseCloud last_cloud;
@@ -72,9 +75,9 @@ int runInduration(const IndurationRun& a) {
     rec.valid_fraction = map.valid_fraction;
     rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!a.quiet) {
-      std::printf("frame %zu (t = %.3f s): %.1f %% matched, reference RMS %.4f mm, %zu plaques, %.1f s "
+      std::printf("frame %zu/%d (t = %.3f s): %.1f %% matched, reference RMS %.4f mm, %zu plaques, %.1f s "
                   "(sgbm %.1f s, refine %.1f s)\n",
-                  records.size() + 1, rec.stamp, 100 * map.valid_fraction, rec.result.reference.rms * 1e3,
+                  records.size() + 1, expected, rec.stamp, 100 * map.valid_fraction, rec.result.reference.rms * 1e3,
                   rec.result.plaques.size(), rec.seconds, map.timing.sgbm, map.timing.refine);
       for (const auto& w : rec.result.warnings) std::printf("  warning: %s\n", w.c_str());
       std::fflush(stdout);
@@ -106,6 +109,9 @@ int runInduration(const IndurationRun& a) {
 
   // ---- results (also when only some frames worked)
   const std::string yaml = a.out + "/induration.yaml";
+  writeParameters(a.out + "/parameters.yaml", "induration, keys of config/induration.yaml", a.command_line,
+                  induration::pipelineOptionKeys(),
+                  [&](const std::string& k) { return induration::getPipelineOption(opt, k); });
   induration::writeInduration(yaml, records, opt.induration, "stereo_left_optical_frame", a.bag);
   const auto& last = records.back().result;
   if (!last.height_map.empty()) {

@@ -16,6 +16,7 @@ struct IndurationRun {
   int frames = -1;
   int ply_step = 2;                                          //!< surface.ply: every ply_step-th pixel
   bool quiet = false;
+  std::vector<std::string> command_line;                     //!< for parameters.yaml
 };
 
 /** @brief Measures every pair; writes the results. @throws std::invalid_argument (bad data/config),

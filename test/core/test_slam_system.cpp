@@ -5,14 +5,17 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <limits>
 #include <random>
+#include <sstream>
 
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/globe.h"
+#include "skin3d/slam/results.h"
 #include "skin3d/slam/slam_config.h"
 #include "skin3d/slam/slam_system.h"
 
@@ -189,4 +192,56 @@ TEST(SlamSystem, ConfigFileListsEveryKeyWithTheCodeDefault) {
   EXPECT_THROW(slam::setSlamOption(&o, "pool_growth", "double"), std::invalid_argument);
   slam::setSlamOption(&o, "pool_growth", "grow_50_percent");
   EXPECT_EQ(o.pool.growth, slam::PoolGrowth::GROW_50_PERCENT);
+}
+
+// The results directory of a short run: rig_covariance.csv holds, per frame, the rig block of the filter's
+// covariance (what the plots' error bounds and correlation matrices are drawn from), with a header naming
+// the variables; it agrees with the filter at the last frame and is symmetric with a positive diagonal.
+TEST(SlamSystem, ResultsDirectoryHasTheRigCovariancePerFrame) {
+  const int frames = 6;
+  const sim::GlobeSimulator sim(smallGlobe(7, frames));
+  slam::SlamSystem s(smallSlam());
+  s.setInitialTwist(sim.linearVelocity(0.0), sim.angularVelocity(0.0));
+  slam::RunRecord run;
+  for (int k = 0; k < frames; ++k) {
+    const auto st = s.processFrame(sim.stamp(k), toMeasurements(sim.measure(k)));
+    run.rows.push_back(slam::stateRow(s, st));
+    slam::StampedPose p;
+    p.t = sim.stamp(k);
+    p.p = s.filter().state().p;
+    p.q = s.filter().state().q;
+    run.trajectory.push_back(p);
+  }
+  const std::string dir = ::testing::TempDir() + "skin3d_results_rigcov";
+  slam::writeResults(dir, run);
+  std::ifstream f(dir + "/rig_covariance.csv");
+  ASSERT_TRUE(f.good()) << dir;
+  std::string comment, header, line;
+  std::getline(f, comment);
+  std::getline(f, header);
+  EXPECT_NE(comment.find("variables: px py pz thx thy thz vx vy vz wx wy wz"), std::string::npos) << comment;
+  EXPECT_EQ(std::count(header.begin(), header.end(), ','), 144) << header.substr(0, 40);
+  std::vector<std::vector<double>> rows;
+  while (std::getline(f, line)) {
+    std::vector<double> v;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) v.push_back(std::stod(cell));
+    ASSERT_EQ(v.size(), 145u);
+    rows.push_back(v);
+  }
+  ASSERT_EQ(static_cast<int>(rows.size()), frames);
+  const Eigen::MatrixXd C = s.filter().covariance().topLeftCorner(12, 12);
+  for (int r = 0; r < frames; ++r) {
+    EXPECT_DOUBLE_EQ(rows[r][0], sim.stamp(r));
+    Eigen::MatrixXd P(12, 12);
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) P(i, j) = rows[r][1 + 12 * i + j];
+    EXPECT_LE((P - P.transpose()).cwiseAbs().maxCoeff(), 1e-6 * P.cwiseAbs().maxCoeff()) << "frame " << r;
+    for (int i = 6; i < 12; ++i) EXPECT_GT(P(i, i), 0.0) << "frame " << r << " variable " << i;
+    if (r == frames - 1) {
+      EXPECT_LE((P - C).cwiseAbs().maxCoeff(), 1e-6 * C.cwiseAbs().maxCoeff());
+      EXPECT_GT(P(0, 0), 0.0);
+    }
+  }
 }

@@ -39,6 +39,10 @@ struct StateRow {
   double corr_vx_wy = 0.0;
   int pool_size = 0, pool_in_use = 0;
   long ever_seen = 0;
+  /** Rig block of the error-state covariance (rigDim() square: dp, dtheta, dv, dw(, db_g)), for the
+   *  per-axis error bounds and the correlation matrix of the plots (float: a long live session keeps
+   *  one per frame). */
+  Eigen::MatrixXf rig_covariance;
 };
 
 /** @brief Snapshot of the filter after a frame. */
@@ -59,6 +63,9 @@ TrajectoryError trajectoryError(const std::vector<StampedPose>& estimate, const 
 void writeTum(const std::string& path, const std::vector<StampedPose>& trajectory);
 void writePly(const std::string& path, const std::vector<MapPoint>& map);
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows);
+/** @brief rig_covariance.csv: a '# variables:' comment naming the rig error-state variables, a header
+ *  "t,P_0_0,P_0_1,...", then one row per frame: t and the rig covariance, row-major (SI: m, rad, s). */
+void writeRigCovarianceCsv(const std::string& path, const std::vector<StateRow>& rows);
 /** @brief sphere_fit.yaml: centre (m), radius and residuals (mm), inliers. */
 void writeSphereFit(const std::string& path, const geometry::SphereFit& fit);
 /** @brief Everything a run leaves behind (what writeResults writes). */
@@ -72,7 +79,7 @@ struct RunRecord {
 };
 
 /**
- * @brief Writes the results directory (created if missing): trajectory.tum, map.ply, state.csv,
+ * @brief Writes the results directory (created if missing): trajectory.tum, map.ply, state.csv, rig_covariance.csv,
  * ground_truth.tum (if any), sphere_fit.yaml (if fit_sphere and the fit succeeds) and summary.yaml
  * (frames, map size, final covariance traces, v_x-omega_y correlation, ATE, sphere fit; mm where the key says).
  * @return the summary text. @throws std::runtime_error naming the path when something cannot be written.

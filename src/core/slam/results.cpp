@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 #include <sys/stat.h>
@@ -43,6 +44,8 @@ StateRow stateRow(const SlamSystem& slam, const FrameStats& stats) {
   r.pool_size = slam.pool().capacity();
   r.pool_in_use = slam.pool().used();
   r.ever_seen = static_cast<long>(slam.pool().everSeen());
+  const int rd = f.rigDim();
+  r.rig_covariance = f.covariance().topLeftCorner(rd, rd).cast<float>();
   return r;
 }
 
@@ -130,6 +133,29 @@ void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows) {
   close(f, path);
 }
 
+void writeRigCovarianceCsv(const std::string& path, const std::vector<StateRow>& rows) {
+  auto f = open(path);
+  int n = 0;
+  for (const auto& r : rows) n = std::max(n, static_cast<int>(r.rig_covariance.rows()));
+  static const char* kNames[] = {"px", "py", "pz", "thx", "thy", "thz", "vx",  "vy",  "vz",
+                                 "wx", "wy", "wz", "bgx", "bgy", "bgz"};
+  f << "# skin3d rig error-state covariance per frame, row-major (m, rad, m/s, rad/s); variables:";
+  for (int i = 0; i < n && i < 15; ++i) f << ' ' << kNames[i];
+  f << "\nt";
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) f << ",P_" << i << '_' << j;
+  f << '\n';
+  f.precision(7);
+  for (const auto& r : rows) {
+    if (r.rig_covariance.rows() != n || r.rig_covariance.cols() != n) continue;  // e.g. rows without a filter
+    f << std::setprecision(10) << r.t << std::setprecision(7);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) f << ',' << r.rig_covariance(i, j);
+    f << '\n';
+  }
+  close(f, path);
+}
+
 void writeSphereFit(const std::string& path, const geometry::SphereFit& fit) {
   YAML::Emitter y;
   y << YAML::BeginMap;
@@ -156,6 +182,7 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
   writeTum(dir + "/trajectory.tum", run.trajectory);
   writePly(dir + "/map.ply", run.map);
   writeStateCsv(dir + "/state.csv", run.rows);
+  writeRigCovarianceCsv(dir + "/rig_covariance.csv", run.rows);
   if (!run.ground_truth.empty()) writeTum(dir + "/ground_truth.tum", run.ground_truth);
   YAML::Emitter y;
   y << YAML::BeginMap;

@@ -6,49 +6,35 @@ Usage: induration_table.py RESULTS/induration.yaml DATASET.truth.yaml
 Matches every true plateau to the measured plaque whose centroid is nearest (within 3 mm) in each frame and
 prints a markdown table: true height, measured mean over the frames, error, std over the frames (the
 repeatability), area and PASI class; plaques that match no plateau are listed after it.
+(The matching is skin3d_plots.IndurationRun.table, which report.py uses too.)
 """
+import os
 import sys
 
-import numpy as np
-import yaml
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import skin3d_plots as sp  # noqa: E402
 
 
 def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
-    res = yaml.safe_load(open(sys.argv[1]))
-    truth = yaml.safe_load(open(sys.argv[2]))
-    frames = res.get("frames") or []
+    if not os.path.exists(sys.argv[2]):
+        sys.exit("induration_table: no truth file '%s'" % sys.argv[2])
+    run = sp.IndurationRun(os.path.dirname(os.path.abspath(sys.argv[1])), truth=sys.argv[2], result=sys.argv[1])
+    rows, extra = run.table()
+    n = len(run.result.get("frames") or [])
     print("| true height (mm) | measured (mm, mean of %d frames) | error (mm) | std over frames (mm) | "
-          "area (mm², true) | PASI |" % len(frames))
+          "area (mm², true) | PASI |" % n)
     print("|---|---|---|---|---|---|")
-    used = [set() for _ in frames]
-    for p in truth["plateaus"]:
-        c = np.array(p["centroid_left_m"])
-        h, a, k = [], [], []
-        for i, f in enumerate(frames):
-            best, best_d = None, 3e-3
-            for j, q in enumerate(f.get("plaques") or []):
-                d = np.linalg.norm(np.array(q["centroid_m"]) - c)
-                if d < best_d:
-                    best, best_d = j, d
-            if best is None:
-                continue
-            used[i].add(best)
-            q = f["plaques"][best]
-            h.append(q["mean_height_mm"]), a.append(q["area_mm2"]), k.append(q["pasi_class"])
-        if not h:
-            print("| %.2f | not found | | | (%.0f) | |" % (p["height_mm"], p["area_mm2"]))
+    for r in rows:
+        if r["mean_mm"] is None:
+            print("| %.2f | not found | | | (%.0f) | |" % (r["true_mm"], r["true_area_mm2"]))
             continue
-        sd = np.std(h, ddof=1) if len(h) > 1 else float("nan")
         print("| %.2f | %.4f | %+.4f | %.4f | %.1f (%.0f) | %s |" % (
-            p["height_mm"], np.mean(h), np.mean(h) - p["height_mm"], sd, np.mean(a), p["area_mm2"],
-            "/".join(str(x) for x in sorted(set(k)))))
-    for i, f in enumerate(frames):
-        for j, q in enumerate(f.get("plaques") or []):
-            if j not in used[i]:
-                print("frame %d: plaque %d (%.3f mm, %.1f mm²) matches no plateau" % (
-                    i, q["id"], q["mean_height_mm"], q["area_mm2"]))
+            r["true_mm"], r["mean_mm"], r["mean_mm"] - r["true_mm"], r["std_mm"] if r["std_mm"] is not None else float("nan"),
+            r["area_mm2"], r["true_area_mm2"], "/".join(str(k) for k in r["pasi"])))
+    for i, q in extra:
+        print("frame %d: plaque %d (%.3f mm, %.1f mm²) matches no plateau" % (i, q["id"], q["mean_height_mm"], q["area_mm2"]))
 
 
 if __name__ == "__main__":

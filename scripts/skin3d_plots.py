@@ -169,13 +169,17 @@ class SlamRun:
 class IndurationRun:
     """An induration results directory (induration.yaml, height_map.png/tiff)."""
 
-    def __init__(self, d, name=None):
+    def __init__(self, d, name=None, truth=None, result=None):
+        """d: the directory; truth: the dataset's truth YAML (default: beside the bag named in induration.yaml);
+        result: the induration.yaml (default: d/induration.yaml)."""
         self.dir = d
         self.name = name or os.path.basename(os.path.normpath(d))
-        self.result = load_yaml(os.path.join(d, "induration.yaml")) or {}
+        self.result = load_yaml(result or os.path.join(d, "induration.yaml")) or {}
         self.parameters = load_yaml(os.path.join(d, "parameters.yaml"))
         src = self.result.get("source")
-        self.truth_yaml = load_yaml(src[:-4] + ".truth.yaml") if isinstance(src, str) and src.endswith(".bag") else None
+        if truth is None and isinstance(src, str) and src.endswith(".bag"):
+            truth = src[:-4] + ".truth.yaml"
+        self.truth_yaml = load_yaml(truth) if truth else None
 
     def table(self, radius_m=3e-3):
         """True vs measured plateaus (the thesis' Table 4.2): list of dicts, and the unmatched plaques."""

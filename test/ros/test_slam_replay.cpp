@@ -6,9 +6,15 @@
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
 
+#include <skin3d/SaveResults.h>
+#include <yaml-cpp/yaml.h>
+
 #include <cmath>
+#include <fstream>
 #include <mutex>
 #include <vector>
+
+#include <unistd.h>
 
 #include "skin3d/sim/globe.h"
 
@@ -53,6 +59,27 @@ TEST(SlamReplay, TrajectoryAgainstGroundTruth) {
   const double rms = std::sqrt(ss / odometry.size());
   std::printf("RMS position error over %zu frames: %.3f mm (bound %.3f mm)\n", odometry.size(), 1e3 * rms, 1e3 * bound);
   EXPECT_LT(rms, bound);
+
+  // The results directory written by the nodelet (issue 7): the ground truth it received on ground_truth/pose
+  // gives the ATE in summary.yaml (the same figure as above, from the nodelet's own pairing), and
+  // parameters.yaml lists the effective parameters.
+  ros::ServiceClient save = nh.serviceClient<skin3d::SaveResults>("eskf_slam/save_results");
+  ASSERT_TRUE(save.waitForExistence(ros::Duration(5.0)));
+  skin3d::SaveResults srv;
+  srv.request.directory = ::testing::TempDir() + "skin3d_slam_replay_" + std::to_string(::getpid());
+  ASSERT_TRUE(save.call(srv));
+  ASSERT_TRUE(srv.response.success) << srv.response.message;
+  const YAML::Node summary = YAML::LoadFile(srv.request.directory + "/summary.yaml");
+  ASSERT_TRUE(summary["ate"]) << "no ATE: the nodelet did not record the ground truth";
+  EXPECT_EQ(summary["ate"]["pairs"].as<int>(), frames);
+  EXPECT_NEAR(summary["ate"]["rmse_mm"].as<double>(), 1e3 * rms, 1e-3);
+  const YAML::Node params = YAML::LoadFile(srv.request.directory + "/parameters.yaml");
+  ASSERT_TRUE(params["parameters"]["use_gyro"]);
+  bool gyro = false;
+  pnh.param("gyro", gyro, false);
+  EXPECT_EQ(params["parameters"]["use_gyro"].as<bool>(), gyro);
+  EXPECT_TRUE(std::ifstream(srv.request.directory + "/ground_truth.tum").good());
+  EXPECT_TRUE(std::ifstream(srv.request.directory + "/rig_covariance.csv").good());
 }
 
 int main(int argc, char** argv) {

@@ -63,7 +63,7 @@ const char* kUsage =
     "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win)\n"
     "  --gyro       fuse imu/data (thesis experiment 3); same as --set use_gyro=true\n"
     "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
-    "  --features   front end for image bags (default kaze)\n"
+    "  --features   front end for image bags (default kaze; akaze/orb also set max_descriptor_distance 5.5)\n"
     "  --frames     process at most N frames\n"
     "  --set        override one SLAM parameter (repeatable)\n"
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
@@ -90,6 +90,10 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
 
 int run(const Args& a) {
   slam::SlamOptions opt;
+  // Binary descriptors (AKAZE, ORB: one float 0/1 per bit, L2 = sqrt(Hamming)) need a wider association
+  // distance than KAZE's unit-norm floats (config/slam.yaml's 0.3 accepts only identical bit strings):
+  // Hamming <= 30, as launch/rig.launch and replay_globe.launch set it; a config file or --set still wins.
+  if (a.features != "kaze") slam::setSlamOption(&opt, "max_descriptor_distance", "5.5");
   for (const auto& c : a.configs) slam::applySlamOptions(&opt, c);
   if (a.gyro) opt.use_gyro = true;
   for (const auto& kv : a.sets) slam::setSlamOption(&opt, kv.first, kv.second);

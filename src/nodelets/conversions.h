@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cv_bridge/cv_bridge.h>
+#include <geometry_msgs/Pose.h>
 #include <ros/node_handle.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -15,6 +16,7 @@
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -30,6 +32,19 @@
 
 namespace skin3d {
 namespace ros_conv {
+
+/** @brief A position and a rotation as a geometry_msgs/Pose. */
+inline geometry_msgs::Pose toPoseMsg(const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
+  geometry_msgs::Pose m;
+  m.position.x = p.x();
+  m.position.y = p.y();
+  m.position.z = p.z();
+  m.orientation.w = q.w();
+  m.orientation.x = q.x();
+  m.orientation.y = q.y();
+  m.orientation.z = q.z();
+  return m;
+}
 
 inline geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   geometry::CameraInfo c;

@@ -266,13 +266,7 @@ class EskfSlamNodelet : public nodelet::Nodelet {
     geometry_msgs::PoseStamped ps;
     ps.header.stamp.fromSec(g.t);
     ps.header.frame_id = world_frame_;
-    ps.pose.position.x = p.x();
-    ps.pose.position.y = p.y();
-    ps.pose.position.z = p.z();
-    ps.pose.orientation.w = q.w();
-    ps.pose.orientation.x = q.x();
-    ps.pose.orientation.y = q.y();
-    ps.pose.orientation.z = q.z();
+    ps.pose = ros_conv::toPoseMsg(p, q);
     truth_path_.header = ps.header;
     truth_path_.poses.push_back(ps);
     slam::StampedPose aligned;  // for the results: ground_truth.tum and the ATE in summary.yaml
@@ -310,10 +304,7 @@ class EskfSlamNodelet : public nodelet::Nodelet {
     nav_msgs::Odometry od;
     od.header = tf.header;
     od.child_frame_id = camera_frame_;
-    od.pose.pose.position.x = x.p.x();
-    od.pose.pose.position.y = x.p.y();
-    od.pose.pose.position.z = x.p.z();
-    od.pose.pose.orientation = tf.transform.rotation;
+    od.pose.pose = ros_conv::toPoseMsg(x.p, x.q);
     const Eigen::MatrixXd& C = f.covariance();
     // [dp, dtheta] (global angle = world axes, as ROS wants the pose covariance) and [dv, dw] (camera frame).
     for (int i = 0; i < 6; ++i)
@@ -390,13 +381,7 @@ class EskfSlamNodelet : public nodelet::Nodelet {
         continue;
       }
       m.id = static_cast<int32_t>(lm.id);
-      m.pose.position.x = lm.position.x();
-      m.pose.position.y = lm.position.y();
-      m.pose.position.z = lm.position.z();
-      m.pose.orientation.w = e.orientation.w();
-      m.pose.orientation.x = e.orientation.x();
-      m.pose.orientation.y = e.orientation.y();
-      m.pose.orientation.z = e.orientation.z();
+      m.pose = ros_conv::toPoseMsg(lm.position, e.orientation);
       m.scale.x = 2.0 * e.semi_axes[0];  // a SPHERE's scale is its diameter
       m.scale.y = 2.0 * e.semi_axes[1];
       m.scale.z = 2.0 * e.semi_axes[2];

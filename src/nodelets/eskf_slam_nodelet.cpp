@@ -439,6 +439,8 @@ class EskfSlamNodelet : public nodelet::Nodelet {
       run_.map = slam_->map();
       run_.fit_sphere = fit_sphere_;
       run_.info = {{"source", "eskf_slam nodelet"}, {"world_frame", world_frame_}, {"camera_frame", camera_frame_}};
+      run_.ground_truth_alignment =
+          "ground_truth/pose moved rigidly onto the SLAM's pose at its first frame (identity on a whole dataset bag)";
       slam::writeResults(dir, run_);
       const slam::SlamOptions& o = slam_->options();
       tools::writeParameters(dir + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml",

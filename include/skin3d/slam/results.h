@@ -74,6 +74,8 @@ struct RunRecord {
   std::vector<StateRow> rows;                 //!< one row per processed frame
   std::vector<MapPoint> map;                  //!< final map (world)
   std::vector<StampedPose> ground_truth;      //!< optional (datasets): ATE and ground_truth.tum
+  /** How ground_truth relates to the SLAM's world (summary.yaml, ate/alignment). */
+  std::string ground_truth_alignment = "none (both worlds are the first camera frame)";
   bool fit_sphere = true;                     //!< robust sphere fit of the map -> sphere_fit.yaml
   std::vector<std::pair<std::string, std::string>> info;  //!< extra summary lines (key, value as text)
 };

@@ -203,7 +203,7 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
       << YAML::Key << "rmse_mm" << YAML::Value << 1e3 * e.rmse << YAML::Key << "mean_mm" << YAML::Value << 1e3 * e.mean
       << YAML::Key << "max_mm" << YAML::Value << 1e3 * e.max << YAML::Key << "final_mm" << YAML::Value << 1e3 * e.final
       << YAML::Key << "rotation_rmse_mrad" << YAML::Value << 1e3 * e.rotation_rmse << YAML::Key << "alignment"
-      << YAML::Value << "none (both worlds are the first camera frame)" << YAML::EndMap;
+      << YAML::Value << run.ground_truth_alignment << YAML::EndMap;
   }
   if (run.fit_sphere && run.map.size() >= 4) {
     std::vector<Eigen::Vector3d> pts;

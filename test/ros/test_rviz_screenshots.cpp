@@ -97,12 +97,15 @@ TEST(RvizScreenshots, EachConfigShowsItsScene) {
   // noise floor: two empty windows of the same config (two image panels: their order varies)
   const std::string e1 = shot("empty_a", "--empty " + kSource + "/rviz/workpiece.rviz", 12);
   const std::string e2 = shot("empty_b", "--empty " + kSource + "/rviz/workpiece.rviz", 12);
+  expectNotBlank(e1);
+  expectNotBlank(e2);
   const double floor = changed(e1, e2), floor_dock = changed(e1, e2, kLeftDock), floor_view = changed(e1, e2, kView3d);
   std::printf("two empty windows differ in %.3f %% of the pixels (left dock %.2f %%, 3D view %.3f %%)\n", 100 * floor,
               100 * floor_dock, 100 * floor_view);
   for (const auto& c : cases) {
     const std::string empty = shot(std::string(c.name) + "_empty", "--empty " + kSource + "/rviz/" + c.config, 12);
     const std::string scene = shot(c.name, c.launch, c.wait_s);
+    expectNotBlank(empty);
     expectNotBlank(scene);
     const double diff = changed(scene, empty);
     const double dock = changed(scene, empty, kLeftDock), view = changed(scene, empty, kView3d);

@@ -326,8 +326,13 @@ struct World {
     truth.v = Eigen::Vector3d(0.03, 0.01, 0.02);
     truth.w = Eigen::Vector3d(0.02, -0.05, 0.03);
   }
-  // Truth motion: the filter's own model with its process noise (v, w, bias random walks).
+  // Truth motion: the filter's own model with its process noise (v, w, bias random walks); with
+  // opt.landmark_walk the points random-walk along the camera's axes as the filter's model says.
   void step(double dt) {
+    if (!(opt.landmark_walk.array() == 0.0).all()) {
+      const Eigen::Matrix3d R = skin3d::geometry::toRotationMatrix(truth.q);
+      for (auto& m : pts) m += R * opt.landmark_walk.cwiseProduct(gauss3(rng, std::sqrt(dt)));
+    }
     truth = propagateNominal(truth, dt, opt.gamma, opt.lambda);
     truth.v += gauss3(rng, opt.velocity_noise * std::sqrt(dt));
     truth.w += gauss3(rng, opt.angular_rate_noise * std::sqrt(dt));
@@ -365,8 +370,10 @@ void expectSameFilter(const Eskf& a, const Eskf& b, double tol, const std::strin
 }
 
 // The same random sequence of predict / update / gyro / add / remove / grow on the fast and the dense filter.
-void runFastVsDense(unsigned seed, bool bias, int n_points, bool explicit_gain, int steps) {
+void runFastVsDense(unsigned seed, bool bias, int n_points, bool explicit_gain, int steps,
+                    const Eigen::Vector3d& walk = Eigen::Vector3d::Zero()) {
   EskfOptions opt = testOptions(bias);
+  opt.landmark_walk = walk;
   opt.joseph_explicit_gain = explicit_gain;
   World w(seed, n_points, opt);
   Eskf fast(opt), dense(opt);
@@ -446,6 +453,7 @@ TEST(EskfFastVsDense, SmallRandomSequences) {
   runFastVsDense(21, false, 30, false, 150);
   runFastVsDense(22, true, 30, false, 150);
   runFastVsDense(23, true, 30, true, 150);
+  runFastVsDense(26, false, 30, false, 150, Eigen::Vector3d(1e-3, 1e-3, 3e-3));  // landmark walk on
 }
 
 TEST(EskfFastVsDense, ThreadedSizes) {
@@ -530,8 +538,11 @@ struct McStats {
 // `runs` independent runs of `steps` steps at 10 Hz among `n_points` fixed landmarks. The rig follows
 // the filter's own motion model (nearly constant velocity: the v, w random walks of the options);
 // the initial estimate is drawn from the initial covariance around the truth.
-McStats monteCarlo(bool gyro, int runs, int steps, int n_points) {
+// With `walk` the landmarks random-walk (m per sqrt(s), camera axes); the filter models it when filter_walks.
+McStats monteCarlo(bool gyro, int runs, int steps, int n_points, const Eigen::Vector3d& walk = Eigen::Vector3d::Zero(),
+                   bool filter_walks = true) {
   EskfOptions opt;
+  opt.landmark_walk = walk;
   opt.velocity_noise = 0.01;
   opt.angular_rate_noise = 0.02;
   opt.estimate_gyro_bias = gyro;
@@ -546,7 +557,9 @@ McStats monteCarlo(bool gyro, int runs, int steps, int n_points) {
   st.dof_sum.assign(steps, 0.0);
   for (int r = 0; r < runs; ++r) {
     World w(1000 + r, n_points, opt);
-    Eskf f(opt);
+    EskfOptions fopt = opt;
+    if (!filter_walks) fopt.landmark_walk.setZero();
+    Eskf f(fopt);
     const int rd = f.rigDim();
     Vec sd = Vec::Constant(rd, 0.01);  // bias: 0.01 rad/s
     sd.segment<6>(0).setConstant(1e-3);  // p: 1 mm, theta: 1 mrad
@@ -630,6 +643,21 @@ TEST(EskfConsistency, MonteCarloNeesAndNisWithGyroAndBias) {
   checkConsistency(monteCarlo(true, runs, 100, 50), runs, "stereo + gyro, bias estimated");
 }
 
+TEST(EskfConsistency, MonteCarloNeesAndNisWithWalkingLandmarks) {
+  // Landmarks that random-walk by (2, 2, 6) mm per sqrt(s) along the camera axes (an image front end's
+  // measurement errors correlated over frames, modelled as moving landmarks), 1 / 1 / 3 mm white noise.
+  const int runs = 50;
+  const Eigen::Vector3d walk(2e-3, 2e-3, 6e-3);
+  checkConsistency(monteCarlo(false, runs, 100, 50, walk, true), runs, "walking landmarks, modelled");
+  // The same data through a filter that takes the landmarks as fixed: overconfident (the check above can fail).
+  const McStats blind = monteCarlo(false, runs, 100, 50, walk, false);
+  double nees_mean = 0;
+  for (double v : blind.nees) nees_mean += v / blind.nees.size();
+  const double hi = chi2Quantile(6.0 * runs, kZ975) / runs;
+  std::cout << "walking landmarks, not modelled: mean pose NEES " << nees_mean << " (95 % bound " << hi << ")\n";
+  EXPECT_GT(nees_mean, 2 * hi);
+}
+
 // ============================================================================ API behaviour
 
 TEST(EskfApi, CapacityAddRemoveAndTraces) {
@@ -681,6 +709,35 @@ TEST(EskfApi, PredictLeavesLandmarkBlocksUntouched) {
   EXPECT_EQ(Mat(f.covariance().bottomRightCorner(f.dim() - rd, f.dim() - rd)),
             Mat(C0.bottomRightCorner(f.dim() - rd, f.dim() - rd)));
   EXPECT_EQ(f.covariance(), Mat(f.covariance().transpose()));
+}
+
+TEST(EskfApi, LandmarkWalkAddsItsProcessNoiseToEachActiveLandmark) {
+  std::mt19937 rng(43);
+  EskfOptions opt = testOptions(false);
+  opt.landmark_walk = Eigen::Vector3d(1e-3, 2e-3, 5e-3);
+  Eskf f = makeFilter(rng, false, 6, 5, opt);
+  const Mat C0 = f.covariance();
+  const Eigen::Matrix3d R = skin3d::geometry::toRotationMatrix(f.state().q);
+  const double dt = 0.07;
+  const Eigen::Matrix3d Q = f.landmarkProcessNoise(dt);
+  // In the camera's axes the walk is diagonal: q^2 dt.
+  const Eigen::Matrix3d Qc = R.transpose() * Q * R;
+  EXPECT_LT((Qc - Eigen::Vector3d(1e-6 * dt, 4e-6 * dt, 25e-6 * dt).asDiagonal().toDenseMatrix()).norm(), 1e-18);
+  Eskf g = f;
+  f.predict(dt);
+  g.predictDense(dt);
+  expectSameFilter(f, g, 1e-12, "walk");
+  for (int a = 0; a < f.capacity(); ++a)
+    for (int b = 0; b < f.capacity(); ++b) {
+      const Mat d = f.covariance().block<3, 3>(f.slotIndex(a), f.slotIndex(b)) - C0.block<3, 3>(f.slotIndex(a), f.slotIndex(b));
+      if (a == b && f.isActive(a))
+        EXPECT_LT((d - Q).norm(), 1e-15) << "slot " << a;  // only the walk: F is I on the landmarks
+      else
+        EXPECT_EQ(maxAbs(d), 0.0) << "slots " << a << ", " << b;  // free slots stay zero, no cross terms
+    }
+  EXPECT_EQ(f.covariance(), Mat(f.covariance().transpose()));
+  opt.landmark_walk.z() = -1e-3;
+  EXPECT_THROW(Eskf{opt}, std::invalid_argument);
 }
 
 TEST(EskfApi, MahalanobisMatchesDenseInnovationAndSingleUpdateNis) {

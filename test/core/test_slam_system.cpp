@@ -177,6 +177,36 @@ TEST(SlamSystem, BadInputIsDroppedOrNamed) {
   EXPECT_NO_THROW(s.processFrame(0.2, toMeasurements(sim.measure(2))));
 }
 
+TEST(SlamSystem, WhiteFractionPlacesNewLandmarksWithTheWholeCovarianceAndUpdatesWithItsWhitePart) {
+  const sim::GlobeSimulator sim(smallGlobe(6, 2));
+  slam::SlamOptions oa = smallSlam(), ob = smallSlam();
+  ob.measurement_white_fraction = 0.25;
+  slam::SlamSystem a(oa), b(ob);
+  for (slam::SlamSystem* s : {&a, &b}) s->processFrame(sim.stamp(0), toMeasurements(sim.measure(0)));
+  // frame 0: every landmark is new, placed with the whole measurement covariance in both
+  const auto ma = a.map(), mb = b.map();
+  ASSERT_EQ(ma.size(), mb.size());
+  ASSERT_GT(ma.size(), 10u);
+  for (size_t i = 0; i < ma.size(); ++i) {
+    EXPECT_EQ(ma[i].position, mb[i].position);
+    EXPECT_EQ(ma[i].covariance, mb[i].covariance);
+  }
+  // frame 1: the same landmarks are updated with a quarter of the covariance: they end more certain
+  const double dt = sim.stamp(1);
+  const auto sa = a.processFrame(dt, toMeasurements(sim.measure(1)));
+  const auto sb = b.processFrame(dt, toMeasurements(sim.measure(1)));
+  ASSERT_GT(sa.used, 10);
+  ASSERT_GT(sb.used, 10);  // (its tighter gate may keep one or two fewer)
+  EXPECT_LT(b.filter().landmarksTrace(), 0.9 * a.filter().landmarksTrace());
+  // the same innovations against a smaller (white) covariance: a larger NIS per degree of freedom
+  EXPECT_GT(sb.nis / sb.nis_dof, sa.nis / sa.nis_dof);
+  for (const char* bad : {"0", "1.5", "-0.1"}) {
+    slam::SlamOptions o = smallSlam();
+    slam::setSlamOption(&o, "measurement_white_fraction", bad);
+    EXPECT_THROW(o.validate(), std::invalid_argument) << bad;
+  }
+}
+
 TEST(SlamSystem, ConfigFileListsEveryKeyWithTheCodeDefault) {
   const std::string path = std::string(SKIN3D_SOURCE_DIR) + "/config/slam.yaml";
   const slam::SlamOptions from_file = slam::loadSlamOptions(path), defaults;

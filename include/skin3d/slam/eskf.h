@@ -17,7 +17,8 @@
  *
  * System model over a step dt (s):
  *   p+ = p + R v dt,  q+ = q (x) Exp(w dt),  v+ = gamma v + w1,  w+ = lambda w + w2,  b+ = b + w3,  m+ = m,
- *   w1 ~ N(0, velocity_noise^2 dt I), w2 ~ N(0, angular_rate_noise^2 dt I), w3 ~ N(0, gyro_bias_walk^2 dt I).
+ *   w1 ~ N(0, velocity_noise^2 dt I), w2 ~ N(0, angular_rate_noise^2 dt I), w3 ~ N(0, gyro_bias_walk^2 dt I),
+ *   and optionally a landmark random walk m+ = m + w4, w4 ~ N(0, R diag(landmark_walk^2 dt) R^T) (default off).
  * Exact first-order error dynamics (verified numerically in test_eskf):
  *   dp+ = dp - [R v dt]x dtheta + R dt dv,   dtheta+ = dtheta + R Jl(w dt) dt dw,
  *   dv+ = gamma dv + w1,  dw+ = lambda dw + w2,  db+ = db + w3,  dm+ = dm.
@@ -37,7 +38,8 @@
  *
  * Cost. The fast path never forms H, F or G as n x n matrices (n = rigDim() + 3 capacity()):
  *  - predict(): F is I outside the rig block, so only C_rr <- F_r C_rr F_r^T + Q and the rig-landmark
- *    cross-covariances C_rm <- F_r C_rm change: O(rigDim^2 n); landmark blocks are not touched.
+ *    cross-covariances C_rm <- F_r C_rm change: O(rigDim^2 n); landmark blocks are not touched (but for
+ *    the 3x3 diagonal blocks when the landmark walk is on: O(n)).
  *  - update(): A = C H^T (n x m, m = 3 x number of observations) is built from the 9 non-zero columns of each
  *    observation's H (O(n m)); S = H A + C_n; with the Cholesky factor S = L L^T, U = A L^-T and the
  *    applied gain is K = U L^-1 = C H^T S^-1, dx = U (L^-1 y). Joseph's expression, expanded, is
@@ -98,6 +100,12 @@ struct EskfOptions {
   double initial_angular_rate_std = 0.2;
   /** Initial std of b_g (rad/s) used by reset(const RigState&). Default 0.01 (~0.6 deg/s turn-on bias). */
   double initial_gyro_bias_std = 0.01;
+  /** Landmark random walk (m per sqrt(s), along the camera's x, y, z axes at the time of the prediction):
+   *  every active landmark gets Q_m = R diag(landmark_walk^2 dt) R^T in predict() (F is unchanged: dm+ = dm + w4).
+   *  It models measurement errors that are correlated over frames (the image front end's: the same feature
+   *  keeps most of its error from one frame to the next) as a slowly moving landmark, so the filter does
+   *  not average them as if they were white. Default 0 (off): landmark-level simulations have white noise. */
+  Eigen::Vector3d landmark_walk = Eigen::Vector3d::Zero();
   /** Threads for the O(n^2 m) covariance update (1 = the calling thread only). Default 2. */
   int threads = 2;
   /** Evaluate Joseph's expanded expression C - K(HC) - (HC)^T K^T + K S K^T term by term with an
@@ -239,6 +247,8 @@ class Eskf {
   Eigen::MatrixXd transitionJacobian(double dt) const;
   /** @brief Process noise Q of the rig block over dt. */
   Eigen::MatrixXd processNoise(double dt) const;
+  /** @brief Process noise of one active landmark over dt: R diag(landmark_walk^2 dt) R^T (m^2; zero when off). */
+  Eigen::Matrix3d landmarkProcessNoise(double dt) const;
   /** @brief Dense 3 x dim() measurement Jacobian of an observation of an active slot. */
   Eigen::MatrixXd measurementJacobian(const Observation& observation) const;
   /** @brief Non-zero blocks of it: pose (3x6, w.r.t. [dp, dtheta]) and landmark (3x3). */
@@ -279,6 +289,7 @@ class Eskf {
   UpdateResult sparseUpdate(const std::vector<BlockRow>& rows, const Eigen::VectorXd& y);
   UpdateResult denseUpdate(const std::vector<BlockRow>& rows, const Eigen::VectorXd& y);
   void applyReset(const Eigen::Vector3d& dtheta);
+  void addLandmarkProcessNoise(double dt);
   void checkSlot(int slot, const char* who) const;
 
   EskfOptions opt_;

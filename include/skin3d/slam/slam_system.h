@@ -62,6 +62,11 @@ struct SlamOptions {
   int consensus_iterations = 100;
   double consensus_gate = 16.27;    //!< chi2 3 dof, 99.9 %
   std::uint64_t consensus_seed = 1; //!< RANSAC's random sequence (deterministic runs)
+  /** Share of a measurement's covariance that is white (independent from frame to frame), in (0, 1]: the
+   *  association gate, the consensus and the update of mapped landmarks use measurement_white_fraction * C;
+   *  a new landmark is placed with the whole C. The rest of the error, correlated over frames, belongs to
+   *  filter.landmark_walk. Default 1 (all white: the landmark-level simulations). */
+  double measurement_white_fraction = 1.0;
   /** @throws std::invalid_argument naming the bad field (also validates filter and pool options). */
   void validate() const;
 };
@@ -136,7 +141,8 @@ class SlamSystem {
   void predictTo(double t, FrameStats* stats);
   void applyChanges(const PoolChanges& changes, FrameStats* stats);
   FrameStats knownMapFrame(double time, const std::vector<Measurement>& m, FrameStats stats);
-  std::vector<bool> consensus(const std::vector<Association>& matches, const std::vector<Measurement>& meas) const;
+  std::vector<bool> consensus(const std::vector<Association>& matches, const std::vector<Measurement>& meas,
+                              const std::vector<Eigen::Matrix3d>& covariances) const;
 
   SlamOptions opt_;
   Eskf filter_;

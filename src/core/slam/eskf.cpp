@@ -138,6 +138,9 @@ void EskfOptions::validate() const {
   nonneg("initial_velocity_std", initial_velocity_std);
   nonneg("initial_angular_rate_std", initial_angular_rate_std);
   nonneg("initial_gyro_bias_std", initial_gyro_bias_std);
+  if (!landmark_walk.allFinite() || (landmark_walk.array() < 0.0).any())
+    fail("EskfOptions: landmark_walk = (" + str(landmark_walk.x()) + ", " + str(landmark_walk.y()) + ", " +
+         str(landmark_walk.z()) + ") must be finite and >= 0");
   if (threads < 1) fail("EskfOptions: threads = " + std::to_string(threads) + " must be >= 1");
 }
 
@@ -347,6 +350,19 @@ Eigen::MatrixXd Eskf::processNoise(double dt) const {
   return Q;
 }
 
+Eigen::Matrix3d Eskf::landmarkProcessNoise(double dt) const {
+  const Eigen::Matrix3d R = geometry::toRotationMatrix(x_.q);
+  return R * Eigen::Vector3d(opt_.landmark_walk.array().square() * dt).asDiagonal() * R.transpose();
+}
+
+void Eskf::addLandmarkProcessNoise(double dt) {
+  if ((opt_.landmark_walk.array() == 0.0).all()) return;
+  Eigen::Matrix3d Q = landmarkProcessNoise(dt);
+  Q = 0.5 * (Q + Q.transpose());
+  for (int j = 0; j < capacity(); ++j)
+    if (active_[j]) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += Q;
+}
+
 void Eskf::measurementJacobianBlocks(int slot, Eigen::Matrix<double, 3, 6>* pose, Eigen::Matrix3d* landmark) const {
   checkSlot(slot, "Eskf::measurementJacobianBlocks");
   if (!active_[slot]) fail("Eskf::measurementJacobianBlocks: slot " + std::to_string(slot) + " is not active");
@@ -416,6 +432,7 @@ void Eskf::predict(double dt) {
   }
   Eigen::MatrixXd Crr = F * C_.topLeftCorner(rd_, rd_) * F.transpose() + processNoise(dt);
   C_.topLeftCorner(rd_, rd_) = 0.5 * (Crr + Crr.transpose());
+  addLandmarkProcessNoise(dt);
   x_ = propagateNominal(x_, dt, opt_.gamma, opt_.lambda);
 }
 
@@ -426,6 +443,11 @@ void Eskf::predictDense(double dt) {
   F.topLeftCorner(rd_, rd_) = transitionJacobian(dt);
   Eigen::MatrixXd C = F * C_ * F.transpose();
   C.topLeftCorner(rd_, rd_) += processNoise(dt);
+  if (!(opt_.landmark_walk.array() == 0.0).all()) {  // the full Q: rig block and every active landmark's block
+    const Eigen::Matrix3d Qm = landmarkProcessNoise(dt);
+    for (int j = 0; j < capacity(); ++j)
+      if (active_[j]) C.block<3, 3>(slotIndex(j), slotIndex(j)) += Qm;
+  }
   C_ = 0.5 * (C + C.transpose());
   x_ = propagateNominal(x_, dt, opt_.gamma, opt_.lambda);
 }

@@ -49,6 +49,8 @@ void SlamOptions::validate() const {
   if (!(max_depth > 0.0)) bad("max_depth (> 0)", max_depth);
   if (consensus_iterations < 0) bad("consensus_iterations (>= 0)", consensus_iterations);
   if (!(consensus_gate > 0.0)) bad("consensus_gate (> 0)", consensus_gate);
+  if (!(measurement_white_fraction > 0.0 && measurement_white_fraction <= 1.0))
+    bad("measurement_white_fraction (in (0, 1])", measurement_white_fraction);
 }
 
 SlamSystem::SlamSystem(const SlamOptions& options)
@@ -158,6 +160,10 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
     predictTo(time, &stats);
   }
   if (!known_positions_.empty()) return knownMapFrame(time, meas, stats);
+  // Mapped landmarks are gated, checked and updated with the white part of each covariance (options);
+  // new landmarks are placed with the whole of it.
+  std::vector<Eigen::Matrix3d> white(meas.size());
+  for (size_t i = 0; i < meas.size(); ++i) white[i] = opt_.measurement_white_fraction * meas[i].C;
 
   applyChanges(pool_.beginFrame(time), &stats);
 
@@ -174,12 +180,12 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
     if (!filter_.isActive(slot)) return std::numeric_limits<double>::infinity();
     const Eigen::Vector3d zc = Rt * (filter_.landmark(slot) - x.p);
     if (!(zc.z() > 0.0) || zc.z() > opt_.max_depth) return std::numeric_limits<double>::infinity();
-    return filter_.mahalanobis(Eskf::Observation{slot, meas[mi].z, meas[mi].C});
+    return filter_.mahalanobis(Eskf::Observation{slot, meas[mi].z, white[mi]});
   };
   AssociationResult a = meas.empty() ? AssociationResult() : pool_.associate(descs, gate);
   stats.associated = static_cast<int>(a.matches.size());
   if (opt_.consensus_iterations > 0 && a.matches.size() >= 4) {
-    const std::vector<bool> ok = consensus(a.matches, meas);
+    const std::vector<bool> ok = consensus(a.matches, meas, white);
     std::vector<Association> kept;
     for (size_t i = 0; i < a.matches.size(); ++i) {
       if (ok[i]) {
@@ -211,7 +217,7 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
   if (static_cast<int>(use.size()) > opt_.max_updates_per_frame) use.resize(opt_.max_updates_per_frame);
   std::vector<Eskf::Observation> obs;
   obs.reserve(use.size());
-  for (const auto& u : use) obs.push_back({u.slot, meas[u.measurement].z, meas[u.measurement].C});
+  for (const auto& u : use) obs.push_back({u.slot, meas[u.measurement].z, white[u.measurement]});
   if (!obs.empty()) {
     const Eskf::UpdateResult r = filter_.update(obs);
     stats.used = r.used;
@@ -240,8 +246,8 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
   return stats;
 }
 
-std::vector<bool> SlamSystem::consensus(const std::vector<Association>& matches,
-                                        const std::vector<Measurement>& meas) const {
+std::vector<bool> SlamSystem::consensus(const std::vector<Association>& matches, const std::vector<Measurement>& meas,
+                                        const std::vector<Eigen::Matrix3d>& covariances) const {
   // Rigid motion world <- camera from 3 pairs (Kabsch), inliers by the Mahalanobis distance of
   // R z + t - m under C_m + R C_z R^T; the hypothesis with most inliers wins (ties: smaller sum of d^2).
   const size_t n = matches.size();
@@ -251,7 +257,7 @@ std::vector<bool> SlamSystem::consensus(const std::vector<Association>& matches,
     m[i] = filter_.landmark(matches[i].slot);
     Cm[i] = filter_.landmarkCovariance(matches[i].slot);
     z[i] = meas[matches[i].measurement].z;
-    Cz[i] = meas[matches[i].measurement].C;
+    Cz[i] = covariances[matches[i].measurement];
   }
   auto inliers = [&](const Eigen::Matrix3d& R, const Eigen::Vector3d& t, std::vector<bool>* in, double* cost) {
     int count = 0;

@@ -456,6 +456,34 @@ TEST(EskfFastVsDense, SmallRandomSequences) {
   runFastVsDense(26, false, 30, false, 150, Eigen::Vector3d(1e-3, 1e-3, 3e-3));  // landmark walk on
 }
 
+TEST(EskfFastVsDense, BlasAndEigenDowndatesAgree) {
+  // n = 12 + 3 * 200 = 612: the downdate runs in 2 parts (OpenBLAS dsyrk + dgemm each, or Eigen's products).
+  std::cout << "this build's downdate: " << (Eskf::blasAvailable() ? "OpenBLAS" : "Eigen only") << "\n";
+  for (int threads : {1, 2}) {
+    EskfOptions o = testOptions(false);
+    o.threads = threads;
+    std::mt19937 ra(77 + threads), rb(77 + threads);
+    Eskf a = makeFilter(ra, false, 200, 200, o);  // set up by addLandmark only: no downdate yet
+    o.blas_downdate = false;
+    Eskf b = makeFilter(rb, false, 200, 200, o);
+    ASSERT_EQ(a.covariance(), b.covariance());
+    for (int frame = 0; frame < 3; ++frame) {
+      std::vector<Eskf::Observation> obs;
+      for (int j = frame; j < 200; j += 3) {
+        const Eigen::Matrix3d C = stereoCov(ra);
+        obs.push_back({j, a.predictObservation(j) + uniform3(ra, 1e-3), C});
+      }
+      a.predict(0.1);
+      b.predict(0.1);
+      a.update(obs);
+      b.update(obs);
+    }
+    EXPECT_LT(relDiff(a.covariance(), b.covariance()), 1e-12) << threads << " threads";
+    EXPECT_LT((a.state().p - b.state().p).norm(), 1e-12) << threads << " threads";
+    EXPECT_EQ(a.covariance(), Mat(a.covariance().transpose()));
+  }
+}
+
 TEST(EskfFastVsDense, ThreadedSizes) {
   // n = 15 + 3 * 130 = 405 >= 384: the covariance update and the mirror run split over 2 threads.
   runFastVsDense(24, true, 130, false, 25);

@@ -46,7 +46,8 @@
  *    C - K (HC) - (HC)^T K^T + K S K^T (algebraically identical to the literal form for ANY K); for
  *    this K its three correction terms all equal U U^T, so the fast path evaluates it as the
  *    symmetric rank-m downdate C - U U^T on the lower triangle, O(n^2 m / 2), split over
- *    EskfOptions::threads threads, then mirrors the triangle (exact symmetry). With
+ *    EskfOptions::threads threads (OpenBLAS dsyrk/dgemm per part when built with it, else Eigen), then
+ *    mirrors the triangle (exact symmetry). With
  *    EskfOptions::joseph_explicit_gain the expanded expression is evaluated term by term with an
  *    explicit K (twice the flops); both agree with the literal dense form to rounding.
  *  - The reset touches only the 3 angular rows/columns: O(n).
@@ -106,6 +107,10 @@ struct EskfOptions {
    *  keeps most of its error from one frame to the next) as a slowly moving landmark, so the filter does
    *  not average them as if they were white. Default 0 (off): landmark-level simulations have white noise. */
   Eigen::Vector3d landmark_walk = Eigen::Vector3d::Zero();
+  /** The default update's symmetric downdate C - U U^T through OpenBLAS (dsyrk/dgemm, kernels for the CPU
+   *  chosen at run time) when the library was built with it (Eskf::blasAvailable()); false: Eigen's product
+   *  (SSE2 in Debian's build). Same result to rounding; the benchmark compares the two. Default true. */
+  bool blas_downdate = true;
   /** Threads for the O(n^2 m) covariance update (1 = the calling thread only). Default 2. */
   int threads = 2;
   /** Evaluate Joseph's expanded expression C - K(HC) - (HC)^T K^T + K S K^T term by term with an
@@ -183,6 +188,8 @@ class Eskf {
   explicit Eskf(const EskfOptions& options = EskfOptions());
 
   const EskfOptions& options() const { return opt_; }
+  /** @brief True when this build does the covariance downdate through OpenBLAS (EskfOptions::blas_downdate). */
+  static bool blasAvailable();
 
   /** @brief Restart: rig state `initial`, rig covariance `initial_rig_covariance` (rigDim() square,
    *  m, rad, m/s, rad/s units; symmetric positive SEMI-definite, so an exactly known initial pose is

@@ -12,7 +12,17 @@
 #include <stdexcept>
 #include <string>
 #include <system_error>
+#include <mutex>
 #include <thread>
+
+#ifdef SKIN3D_HAVE_OPENBLAS
+#include <cblas.h>
+// OpenBLAS's own extensions (declared in its cblas.h; repeated here in case another cblas.h comes first)
+extern "C" {
+int openblas_get_parallel(void);
+void openblas_set_num_threads(int num_threads);
+}
+#endif
 
 namespace skin3d {
 namespace slam {
@@ -72,15 +82,47 @@ void runParallel(int parts, const Body& body) {
 
 int usefulThreads(int n, int threads) { return n < 384 ? 1 : std::max(1, std::min(threads, 8)); }
 
+#ifdef SKIN3D_HAVE_OPENBLAS
+// OpenBLAS picks its kernels for the CPU at run time (AVX2 / AVX-512 where Eigen is compiled for SSE2 only).
+// The threads are ours (runParallel): a multi-threaded OpenBLAS found at run time is set to one thread.
+void useSerialBlas() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    if (openblas_get_parallel() != 0) openblas_set_num_threads(1);
+  });
+}
+#endif
+
 // Lower triangle (diagonal included) of C += alpha X Y^T; the strict upper triangle is not touched.
+// With OpenBLAS and X == Y (the default update's C - U U^T): dsyrk on each part's diagonal block, dgemm below it.
 void lowerUpdate(Eigen::MatrixXd& C, const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, double alpha,
-                 int threads) {
+                 int threads, bool use_blas) {
   const int n = static_cast<int>(C.rows());
   const int parts = usefulThreads(n, threads);
   const std::vector<int> b = triangleSplit(n, parts);
+#ifdef SKIN3D_HAVE_OPENBLAS
+  const bool blas = use_blas && &X == &Y && X.cols() > 0;
+  if (blas) useSerialBlas();
+#else
+  const bool blas = false;
+  (void)use_blas;
+#endif
   runParallel(parts, [&](int k) {
     const int c0 = b[k], w = b[k + 1] - b[k], below = n - b[k + 1];
     if (w <= 0) return;
+#ifdef SKIN3D_HAVE_OPENBLAS
+    if (blas) {
+      const int m = static_cast<int>(X.cols()), ldx = static_cast<int>(X.outerStride());
+      const int ldc = static_cast<int>(C.outerStride());
+      double* c = C.data();
+      cblas_dsyrk(CblasColMajor, CblasLower, CblasNoTrans, w, m, alpha, X.data() + c0, ldx, 1.0, c + c0 + c0 * ldc, ldc);
+      if (below > 0)
+        cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, below, w, m, alpha, X.data() + c0 + w, ldx, X.data() + c0,
+                    ldx, 1.0, c + (c0 + w) + c0 * ldc, ldc);
+      return;
+    }
+#endif
+    (void)blas;
     C.block(c0, c0, w, w).triangularView<Eigen::Lower>() +=
         alpha * X.middleRows(c0, w) * Y.middleRows(c0, w).transpose();
     if (below > 0)
@@ -118,6 +160,14 @@ void mirrorLower(Eigen::MatrixXd& C, int threads) {
 }  // namespace
 
 // ============================================================================ options
+
+bool Eskf::blasAvailable() {
+#ifdef SKIN3D_HAVE_OPENBLAS
+  return true;
+#else
+  return false;
+#endif
+}
 
 void EskfOptions::validate() const {
   auto in01 = [](const char* name, double v) {
@@ -544,7 +594,7 @@ Eskf::UpdateResult Eskf::sparseUpdate(const std::vector<BlockRow>& rows, const E
   if (!opt_.joseph_explicit_gain) {
     dx.noalias() = U * e;
     // Joseph, expanded: C - K(HC) - (HC)^T K^T + K S K^T; each correction term is U U^T for this K.
-    lowerUpdate(C_, U, U, -1.0, opt_.threads);
+    lowerUpdate(C_, U, U, -1.0, opt_.threads, opt_.blas_downdate);
   } else {
     Eigen::MatrixXd K = U;
     llt.matrixL().solveInPlace<Eigen::OnTheRight>(K);  // K L = U
@@ -556,7 +606,7 @@ Eskf::UpdateResult Eskf::sparseUpdate(const std::vector<BlockRow>& rows, const E
     Y.leftCols(m).noalias() = K * S;
     Y.leftCols(m) -= A;
     Y.rightCols(m) = -K;
-    lowerUpdate(C_, X, Y, 1.0, opt_.threads);
+    lowerUpdate(C_, X, Y, 1.0, opt_.threads, false);
   }
   mirrorLower(C_, opt_.threads);
 

@@ -95,6 +95,7 @@ const std::vector<std::pair<std::string, Field>>& table() {
       SKIN3D_DOUBLE("landmark_walk_y", filter.landmark_walk.y()),
       SKIN3D_DOUBLE("landmark_walk_z", filter.landmark_walk.z()),
       SKIN3D_INT("threads", filter.threads),
+      SKIN3D_BOOL("blas_downdate", filter.blas_downdate),
       SKIN3D_INT("pool_initial_capacity", pool.initial_capacity),
       {"pool_growth", enumField<PoolGrowth>("pool_growth", nullptr,
                                             {{"add_100", PoolGrowth::ADD_100}, {"grow_50_percent", PoolGrowth::GROW_50_PERCENT}},

@@ -162,6 +162,16 @@ void emitRealism(YAML::Emitter& e, const sim::DatasetConfig& c, const sim::Pertu
   }
   e << YAML::Key << "calibration_error" << YAML::Value << YAML::BeginMap;
   e << YAML::Key << "enabled" << YAML::Value << im.perturbation.enabled;
+  e << YAML::Key << "model" << YAML::Value << sim::calibrationErrorModelName(im.perturbation.model);
+  if (im.perturbation.enabled && im.perturbation.model == sim::CalibrationErrorModel::Chessboard) {
+    e << YAML::Key << "views" << YAML::Value << im.perturbation.views;
+    e << YAML::Key << "corner_sigma_px" << YAML::Value << im.perturbation.corner_sigma_px;
+    e << YAML::Key << "k_coefficients" << YAML::Value << im.perturbation.k_coefficients;
+    e << YAML::Key << "board_square_mm" << YAML::Value << p.board_square_m * 1e3;
+    e << YAML::Key << "calibration_rms_px" << YAML::Value << p.calibration_rms_px;
+  }
+  e << YAML::Key << "depth_error_at_working_distance_mm" << YAML::Value << p.depth_error_m * 1e3;
+  e << YAML::Key << "largest_depth_error_at_working_distance_mm" << YAML::Value << p.depth_error_max_m * 1e3;
   e << YAML::Key << "baseline_scale" << YAML::Value << p.baseline_scale;
   e << YAML::Key << "rotation_error_deg" << YAML::Value;
   emitVec(e, p.rotation_error * 180.0 / M_PI);
@@ -219,7 +229,8 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
   const bool images = c.kind == sim::DatasetKind::GlobeImages;
   const geometry::StereoRig true_rig = s.rig();
   const sim::PerturbedCalibration calib =
-      images ? sim::perturbCalibration(true_rig, c.images.perturbation, c.seed) : sim::PerturbedCalibration{true_rig};
+      images ? sim::perturbCalibration(true_rig, c.images.perturbation, c.seed, gc.distance - gc.radius)
+             : sim::PerturbedCalibration{true_rig};
   const stereo::RectifiedPair info = stereo::rectifyStereo(calib.rig);
 
   std::unique_ptr<sim::SphereScene> scene;
@@ -326,7 +337,8 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
   const sim::WorkpieceConfig& w = c.workpiece;
   const sim::RigConfig rc = w.scaledRig();
   const geometry::StereoRig true_rig = rc.makeRig();
-  const sim::PerturbedCalibration calib = sim::perturbCalibration(true_rig, c.images.perturbation, c.seed);
+  const sim::PerturbedCalibration calib =
+      sim::perturbCalibration(true_rig, c.images.perturbation, c.seed, w.working_distance);
 
   // World = plate frame (top surface z = 0). The rig axis points down at the plate centre, tilted about x.
   Eigen::Isometry3d T_W_rig = Eigen::Isometry3d::Identity();

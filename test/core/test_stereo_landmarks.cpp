@@ -141,6 +141,57 @@ TEST(StereoLandmarks, LocalisationSigmaIsEstimatedFromTheRowResiduals) {
   EXPECT_TRUE(std::isnan(stereo::estimateLocalisationSigma({})));
 }
 
+// Keypoints found at coarser scales are localised worse (TriangulateOptions::size_noise): with the noise of each
+// match proportional to its size, the per-frame fit gives each size its own variance, and the landmarks of every
+// size agree with their covariances; one pooled sigma would be too small for the large ones and too big for the
+// small ones. Points on a fronto-parallel plane (no slant).
+TEST(StereoLandmarks, LocalisationNoiseGrowsWithKeypointSize) {
+  const Fixture f(false);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const double sizes[3] = {4.0, 8.0, 16.0}, per_px = 0.015;  // sigma = 0.06, 0.12, 0.24 px
+  std::vector<stereo::StereoMatch> ms;
+  std::vector<Eigen::Vector3d> truth;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 30; ++j) {
+      const Eigen::Vector3d X(-0.12 + 0.3 * i / 39.0, -0.1 + 0.2 * j / 29.0, 0.45);
+      auto m = f.match(X);
+      m.size = static_cast<float>(sizes[(i + j) % 3]);
+      const double sg = per_px * m.size;
+      m.left += sg * Eigen::Vector2d(n(rng), n(rng));
+      m.right += sg * Eigen::Vector2d(n(rng), n(rng));
+      ms.push_back(m);
+      truth.push_back(X);
+    }
+  for (bool model : {true, false}) {
+    stereo::TriangulateOptions o;
+    o.size_noise = model;
+    o.disparity_gate = 0.0;  // keep every match: the landmarks stay in the order of the matches
+    o.row_gate = 0.0;
+    const auto l = stereo::triangulateMatches(f.pair.left, f.pair.right, ms, o);
+    ASSERT_EQ(l.size(), ms.size());
+    double nees[3] = {0, 0, 0};
+    int count[3] = {0, 0, 0};
+    for (size_t k = 0; k < l.size(); ++k) {
+      const int c = l[k].size < 6 ? 0 : (l[k].size < 12 ? 1 : 2);
+      if (model) EXPECT_NEAR(std::sqrt(l[k].var_v), per_px * l[k].size, 0.25 * per_px * l[k].size) << l[k].size;
+      const Eigen::Vector3d e = l[k].position - truth[k];
+      nees[c] += e.dot(l[k].covariance.inverse() * e);
+      ++count[c];
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double mean = nees[c] / count[c];  // 400 samples: chi2(3) mean 3 +- 0.12 (1 sigma)
+      if (model) {
+        EXPECT_NEAR(mean, 3.0, 0.6) << "size " << sizes[c];
+      } else if (c == 0) {
+        EXPECT_LT(mean, 1.5) << "pooled sigma, smallest keypoints: too conservative";
+      } else if (c == 2) {
+        EXPECT_GT(mean, 6.0) << "pooled sigma, largest keypoints: overconfident";
+      }
+    }
+  }
+}
+
 TEST(StereoLandmarks, LocalDisparityGateDropsMismatches) {
   // A smooth surface seen with 0.2 px noise; every 25th match gets a wrong disparity (a mismatch).
   const Fixture f(false);

@@ -31,14 +31,48 @@ enum class DatasetKind { GlobeLandmarks, GlobeImages, Workpiece };
 DatasetKind parseDatasetKind(const std::string& name);
 std::string datasetKindName(DatasetKind kind);
 
-/** @brief How far the calibration written to the bag is off the truth (1 sigma each). */
+/** @brief How the calibration written to the bag is drawn. */
+enum class CalibrationErrorModel {
+  /** A stereo calibration is simulated (the default): a chessboard is placed at `views` random poses around the
+   *  working distance, its corners are projected with the true rig, `corner_sigma_px` Gaussian noise is added and
+   *  the core's calibrateStereo (the calibrate_stereo tool's algorithm) estimates the rig. Its errors are therefore
+   *  correlated the way a real calibration's are: the principal points may be off by a pixel each, but the
+   *  disparity a board at a known distance produces is fitted, so the depth error stays small. */
+  Chessboard,
+  /** Each parameter is drawn independently (the model up to session 5): principal points, focal lengths,
+   *  baseline and relative rotation. Independent principal-point errors shift the disparity by
+   *  sqrt(2) * principal_point_px, which a calibration against a metric board would not leave. */
+  Independent,
+};
+
+/** @brief How far the calibration written to the bag is off the truth. */
 struct CalibrationPerturbation {
   bool enabled = true;
+  CalibrationErrorModel model = CalibrationErrorModel::Chessboard;
+  // --- Independent model (1 sigma each)
   double baseline_rel = 0.003;        //!< relative baseline length error
   double rotation = 0.05 * M_PI / 180.0;  //!< rad, RMS magnitude of the relative rotation error
   double principal_point = 1.5;       //!< px, per coordinate and camera
   double focal_rel = 0.0015;          //!< relative focal length error per camera
+  // --- Chessboard model
+  int views = 15;                     //!< board poses (pairs) used by the simulated calibration
+  /** Corner localisation noise, px per coordinate (1 sigma). 0.14 px gives the simulated calibration an RMS
+   *  reprojection error of ~0.2 px (OpenCV's RMS is per corner, both coordinates: sqrt(2) sigma), what
+   *  calibrate_stereo reaches on the real pairs in ../shared/data/chessboard_stereo (0.197 px). */
+  double corner_sigma_px = 0.14;
+  int board_cols = 9, board_rows = 6;  //!< inner corners, as the real board
+  /** Radial distortion coefficients the calibration estimates (calibrate_stereo's --k-coefficients). */
+  int k_coefficients = 2;
+  /** Size of the board: its corner grid spans this fraction of the left image's width at the working distance. */
+  double board_fill = 0.4;
+  /** Board distances, uniform in [min, max] x working distance. */
+  double min_distance_rel = 0.75, max_distance_rel = 1.5;
+  double max_tilt = 30.0 * M_PI / 180.0;  //!< rad, board tilt about its x and y axes (uniform in +-)
 };
+
+/** @brief Name of a model ("chessboard", "independent"); parse throws SimConfigError listing the known ones. */
+std::string calibrationErrorModelName(CalibrationErrorModel m);
+CalibrationErrorModel parseCalibrationErrorModel(const std::string& name);
 
 /** @brief What a perturbation drew, and the rig the bag's camera_info describes. */
 struct PerturbedCalibration {
@@ -47,11 +81,24 @@ struct PerturbedCalibration {
   Eigen::Vector3d rotation_error = Eigen::Vector3d::Zero();  //!< rad, rotation vector applied to R_rl
   Eigen::Vector2d principal_left = Eigen::Vector2d::Zero(), principal_right = Eigen::Vector2d::Zero();  //!< px
   double focal_scale_left = 1.0, focal_scale_right = 1.0;
+  /** Error of the depth triangulated with the measured calibration from the true pixels of a point on the left
+   *  optical axis at the working distance (m; > 0: too far). What the calibration error does to a landmark. */
+  double depth_error_m = 0.0;
+  /** The largest such error over a 9 x 9 grid of the left image (points at the working distance the right camera
+   *  sees too), m. */
+  double depth_error_max_m = 0.0;
+  // Chessboard model only
+  double calibration_rms_px = 0.0;    //!< the simulated calibration's RMS reprojection error
+  double board_square_m = 0.0;
 };
 
-/** @brief Draws a calibration error for `truth` (deterministic in seed). Disabled: returns the truth. */
+/**
+ * @brief Draws a calibration error for `truth` (deterministic in seed). Disabled: returns the truth.
+ * @param working_distance m, where the rig is used (the board poses of the Chessboard model, depth_error_m).
+ * @throws std::runtime_error if the Chessboard model cannot place its board in both images.
+ */
 PerturbedCalibration perturbCalibration(const geometry::StereoRig& truth, const CalibrationPerturbation& p,
-                                        std::uint64_t seed);
+                                        std::uint64_t seed, double working_distance);
 
 struct ImageConfig {
   bool ideal = false;                 //!< no realism, exact calibration (debugging)

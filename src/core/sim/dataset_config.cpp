@@ -235,8 +235,25 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   readPhotometry(is.sub("left", false, {"gain", "offset", "gamma"}), &im.left);
   readPhotometry(is.sub("right", false, {"gain", "offset", "gamma"}), &im.right);
   const Section ce = is.sub("calibration_error", false,
-                            {"enabled", "baseline_rel", "rotation_deg", "principal_point_px", "focal_rel"});
+                            {"enabled", "model", "baseline_rel", "rotation_deg", "principal_point_px", "focal_rel",
+                             "views", "corner_sigma_px", "k_coefficients", "board", "board_fill", "distance_rel", "max_tilt_deg"});
   im.perturbation.enabled = ce.boolean("enabled", im.perturbation.enabled);
+  im.perturbation.model = parseCalibrationErrorModel(ce.text("model", calibrationErrorModelName(im.perturbation.model)));
+  im.perturbation.views = ce.integer("views", false, im.perturbation.views);
+  im.perturbation.k_coefficients = ce.integer("k_coefficients", false, im.perturbation.k_coefficients);
+  im.perturbation.corner_sigma_px = ce.number("corner_sigma_px", false, im.perturbation.corner_sigma_px);
+  im.perturbation.board_fill = ce.number("board_fill", false, im.perturbation.board_fill);
+  im.perturbation.max_tilt = ce.number("max_tilt_deg", false, im.perturbation.max_tilt / kDeg) * kDeg;
+  if (ce.has("board")) {
+    const std::vector<double> b = ce.list("board", 2, false);
+    im.perturbation.board_cols = static_cast<int>(b[0]);
+    im.perturbation.board_rows = static_cast<int>(b[1]);
+  }
+  if (ce.has("distance_rel")) {
+    const std::vector<double> d = ce.list("distance_rel", 2, false);
+    im.perturbation.min_distance_rel = d[0];
+    im.perturbation.max_distance_rel = d[1];
+  }
   im.perturbation.baseline_rel = ce.number("baseline_rel", false, im.perturbation.baseline_rel);
   im.perturbation.rotation = ce.number("rotation_deg", false, im.perturbation.rotation / kDeg) * kDeg;
   im.perturbation.principal_point = ce.number("principal_point_px", false, im.perturbation.principal_point);
@@ -272,35 +289,20 @@ void validateDatasetConfig(const DatasetConfig& c) {
                                   {"principal_point_px", p.principal_point},
                                   {"focal_rel", p.focal_rel}})
       if (!(v >= 0) || !std::isfinite(v)) bad(std::string("images.calibration_error.") + name, v, "must be >= 0");
+    if (p.k_coefficients < 0 || p.k_coefficients > 3)
+      bad("images.calibration_error.k_coefficients", p.k_coefficients, "must be in 0..3");
+    if (p.views < 3 || p.views > 200) bad("images.calibration_error.views", p.views, "must be in 3..200");
+    if (!(p.corner_sigma_px >= 0) || !std::isfinite(p.corner_sigma_px))
+      bad("images.calibration_error.corner_sigma_px", p.corner_sigma_px, "must be >= 0");
+    if (p.board_cols < 3 || p.board_rows < 3 || p.board_cols > 40 || p.board_rows > 40)
+      bad("images.calibration_error.board", p.board_cols, "needs [cols, rows] of inner corners, each in 3..40");
+    if (!(p.board_fill > 0) || p.board_fill > 1)
+      bad("images.calibration_error.board_fill", p.board_fill, "must be in (0, 1]");
+    if (!(p.min_distance_rel > 0) || !(p.max_distance_rel >= p.min_distance_rel) || !std::isfinite(p.max_distance_rel))
+      bad("images.calibration_error.distance_rel", p.min_distance_rel, "needs [min, max] with 0 < min <= max");
+    if (!(p.max_tilt >= 0) || p.max_tilt >= 80 * kDeg)
+      bad("images.calibration_error.max_tilt_deg", p.max_tilt / kDeg, "must be in [0, 80)");
   }
-}
-
-PerturbedCalibration perturbCalibration(const geometry::StereoRig& truth, const CalibrationPerturbation& p,
-                                        std::uint64_t seed) {
-  PerturbedCalibration out;
-  out.rig = truth;
-  if (!p.enabled) return out;
-  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 0xCA11B);
-  std::normal_distribution<double> n(0.0, 1.0);
-  out.baseline_scale = 1.0 + p.baseline_rel * n(rng);
-  // rotation: RMS magnitude of the 3-axis error vector (per axis rotation / sqrt(3)).
-  out.rotation_error = p.rotation / std::sqrt(3.0) * Eigen::Vector3d(n(rng), n(rng), n(rng));
-  out.principal_left = p.principal_point * Eigen::Vector2d(n(rng), n(rng));
-  out.principal_right = p.principal_point * Eigen::Vector2d(n(rng), n(rng));
-  out.focal_scale_left = 1.0 + p.focal_rel * n(rng);
-  out.focal_scale_right = 1.0 + p.focal_rel * n(rng);
-  const auto perturbK = [](const geometry::PinholeCamera& cam, double fs, const Eigen::Vector2d& dpp) {
-    Eigen::Matrix3d K = cam.K();
-    K(0, 0) *= fs;
-    K(1, 1) *= fs;
-    K(0, 2) += dpp.x();
-    K(1, 2) += dpp.y();
-    return geometry::PinholeCamera(K, cam.width(), cam.height(), cam.D());
-  };
-  out.rig = geometry::StereoRig(perturbK(truth.left(), out.focal_scale_left, out.principal_left),
-                                perturbK(truth.right(), out.focal_scale_right, out.principal_right),
-                                geometry::so3Exp(out.rotation_error) * truth.R_rl(), truth.t_rl() * out.baseline_scale);
-  return out;
 }
 
 }  // namespace sim

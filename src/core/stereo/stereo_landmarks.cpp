@@ -126,6 +126,32 @@ void localPlanes(const std::vector<StereoMatch>& m, const std::vector<size_t>& k
   }
 }
 
+// Localisation variance against keypoint scale, var(s) = c0 + c1 s^2 (s = keypoint diameter), fitted by least
+// squares to the squared row residuals (v_l - v_r)^2 / 2 of the matches that passed the row gate (each residual is
+// the difference of two localisation errors). A second moment on purpose: the NEES a covariance must match is one,
+// and the row residuals are heavy-tailed, so a median-based spread would make the covariances too small.
+// False (keep the pooled sigma) with fewer than 50 matches or when the sizes do not spread (ORB's fixed patch).
+bool fitSizeNoise(const std::vector<double>& dv, const std::vector<double>& size, double* c0, double* c1) {
+  const size_t n = dv.size();
+  if (n < 50) return false;
+  Eigen::Matrix2d N = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d g = Eigen::Vector2d::Zero();
+  double s2_min = 1e300, s2_max = -1e300;
+  for (size_t i = 0; i < n; ++i) {
+    const double x = size[i] * size[i];
+    s2_min = std::min(s2_min, x);
+    s2_max = std::max(s2_max, x);
+    N += Eigen::Vector2d(1.0, x) * Eigen::RowVector2d(1.0, x);
+    g += Eigen::Vector2d(1.0, x) * (0.5 * dv[i] * dv[i]);
+  }
+  if (!(s2_max > 1.5 * s2_min)) return false;
+  const Eigen::Vector2d c = N.ldlt().solve(g);
+  if (!c.allFinite()) return false;
+  *c1 = std::max(0.0, c[1]);
+  *c0 = c[1] > 0.0 ? c[0] : g[0] / N(0, 0);  // no growth with size: the pooled mean square
+  return true;
+}
+
 // Disparity variance model var_d(t) = a + b t^2 (t = tan of the surface slant) fitted robustly to the plane
 // residuals: the matches are split into 5 bins by t^2, each bin's variance is estimated as
 // median(r^2) / 0.455 (the chi2(1) median) / (1 + h) with h = 6 / k (the quadratic's own prediction variance
@@ -210,29 +236,61 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
     else
       kept.push_back(i);
   }
+  // Scale-dependent localisation noise (see TriangulateOptions::size_noise), from the kept matches' row residuals.
+  std::vector<double> var_v(kept.size(), sigma * sigma);
+  bool size_model = false;
+  if (options.size_noise && options.sigma_px == 0.0 && kept.size() >= 50) {
+    std::vector<double> dv(kept.size()), sz(kept.size());
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      dv[ii] = matches[kept[ii]].left.y() - matches[kept[ii]].right.y() - median_dv;
+      sz[ii] = matches[kept[ii]].size;
+    }
+    double c0 = 0.0, c1 = 0.0;
+    if (fitSizeNoise(dv, sz, &c0, &c1)) {
+      size_model = true;
+      const double lo = options.min_sigma_px * options.min_sigma_px, hi = options.max_sigma_px * options.max_sigma_px;
+      for (size_t ii = 0; ii < kept.size(); ++ii) var_v[ii] = std::min(hi, std::max(lo, c0 + c1 * sz[ii] * sz[ii]));
+    }
+  }
   // Slant-dependent disparity noise (see TriangulateOptions::slant_noise).
-  std::vector<double> var_u(kept.size(), sigma * sigma);
+  std::vector<double> var_u = var_v;
   const int k = options.neighbours;
   if (options.slant_noise && k >= 3 && kept.size() > static_cast<size_t>(2 * k)) {
-    std::vector<double> res, t2(kept.size());
+    std::vector<double> res, x(kept.size());
     std::vector<Eigen::Vector2d> grad;
     localPlanes(matches, kept, k, &res, &grad);
     const double f = left.P(0, 0), offset = left.P(0, 2) - right.P(0, 2);
+    // The foreshortening that differs between the two views moves a keypoint in proportion to its size: the
+    // slant variable is (size / median size)^2 tan^2(theta) when the size model is on, tan^2(theta) otherwise.
+    double size_ref = 1.0;
+    if (size_model) {
+      std::vector<double> sz;
+      for (size_t i : kept) sz.push_back(matches[i].size);
+      std::nth_element(sz.begin(), sz.begin() + sz.size() / 2, sz.end());
+      size_ref = sz[sz.size() / 2] > 0.0 ? sz[sz.size() / 2] : 1.0;
+    }
     for (size_t ii = 0; ii < kept.size(); ++ii) {
       const StereoMatch& m = matches[kept[ii]];
       const double d = std::max(0.5, m.left.x() - m.right.x() - offset);
-      t2[ii] = std::pow(grad[ii].norm() * f / d, 2);
+      const double rel = size_model && m.size > 0.0 ? m.size / size_ref : 1.0;
+      x[ii] = std::pow(rel * grad[ii].norm() * f / d, 2);
+    }
+    // var_d,i = 2 var_v,i + b x_i. Normalised by each match's own noise, r_i^2 / (2 var_v,i) = 1 + b xi_i with
+    // xi_i = x_i / (2 var_v,i): the fit's slope is b (its intercept, ~1, is not used).
+    std::vector<double> xi(kept.size());
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      res[ii] /= std::sqrt(2.0 * var_v[ii]);
+      xi[ii] = x[ii] / (2.0 * var_v[ii]);
     }
     double a = 0.0, b = 0.0;
-    const bool fitted = fitSlantNoise(res, t2, k, &a, &b);
-    if (fitted)
-      for (size_t ii = 0; ii < kept.size(); ++ii) var_u[ii] = sigma * sigma + 0.5 * b * t2[ii];
+    if (fitSlantNoise(res, xi, k, &a, &b))
+      for (size_t ii = 0; ii < kept.size(); ++ii) var_u[ii] = var_v[ii] + 0.5 * b * x[ii];
   }
   for (size_t ii = 0; ii < kept.size(); ++ii) {
     const StereoMatch& m = matches[kept[ii]];
     views[0].uv = m.left;
     views[1].uv = m.right;
-    views[0].cov_uv = views[1].cov_uv = Eigen::Vector2d(var_u[ii], sigma * sigma).asDiagonal();
+    views[0].cov_uv = views[1].cov_uv = Eigen::Vector2d(var_u[ii], var_v[ii]).asDiagonal();
     const geometry::TriangulationResult r = geometry::triangulateMmse(views);
     if (!r.ok || !(r.X.z() >= options.min_depth) || !(r.X.z() <= options.max_depth)) {
       ++n_dropped;
@@ -246,6 +304,9 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
     l.strength = m.strength;
     l.uv_left = m.left;
     l.uv_right = m.right;
+    l.size = m.size;
+    l.var_u = var_u[ii];
+    l.var_v = var_v[ii];
     out.push_back(std::move(l));
   }
   if (dropped) *dropped = n_dropped;

@@ -12,7 +12,8 @@
  *             ~max_depth (m, 5.0); ~max_landmarks (0 = all; else the strongest N); ~queue_size (5);
  *             ~row_gate (3.0, in sqrt(2) sigma of the row residual; 0 = off); ~disparity_gate (4.0, in robust
  *             spreads of the disparity residuals of a plane through the ~neighbours (12) nearest matches; 0 = off);
- *             ~slant_noise (true: horizontal localisation error grown with the surface slant, see stereo_landmarks.h).
+ *             ~slant_noise (true: horizontal localisation error grown with the surface slant, see stereo_landmarks.h);
+ *             ~size_noise (true: localisation error grown with the keypoint size, fitted per frame; sigma_px 0 only).
  * Bad input (uncalibrated camera_info, frame mismatch) drops the frame with a throttled warning.
  */
 #include <message_filters/subscriber.h>
@@ -49,6 +50,7 @@ class StereoTriangulateNodelet : public nodelet::Nodelet {
     pnh.param("disparity_gate", options_.disparity_gate, options_.disparity_gate);
     pnh.param("neighbours", options_.neighbours, options_.neighbours);
     pnh.param("slant_noise", options_.slant_noise, options_.slant_noise);
+    pnh.param("size_noise", options_.size_noise, options_.size_noise);
     pnh.param("max_landmarks", max_landmarks_, 0);
     int queue = 5;
     pnh.param("queue_size", queue, 5);

@@ -161,12 +161,13 @@ TEST(CalibrationReal, MatchesOpenCvStereoCalibrateAndAlignsRows) {
   const auto calib = stereo::calibrateStereo(corners, pattern);
 
   // Reference: OpenCV directly on the same corners, standard settings as ROS camera_calibration uses them:
-  // cv::calibrateCamera per camera (default flags), then cv::stereoCalibrate with CALIB_FIX_INTRINSIC.
+  // cv::calibrateCamera per camera (k1 k2 p1 p2: CALIB_FIX_K3, ROS's default --k-coefficients 2, also skin3d's
+  // default), then cv::stereoCalibrate with CALIB_FIX_INTRINSIC.
   const std::vector<std::vector<cv::Point3f>> obj(corners.names.size(), stereo::boardObjectPoints(pattern));
   cv::Mat K1, D1, K2, D2, R, T, E, F;
   std::vector<cv::Mat> rv, tv;
-  cv::calibrateCamera(obj, corners.left, corners.image_size, K1, D1, rv, tv);
-  cv::calibrateCamera(obj, corners.right, corners.image_size, K2, D2, rv, tv);
+  cv::calibrateCamera(obj, corners.left, corners.image_size, K1, D1, rv, tv, cv::CALIB_FIX_K3);
+  cv::calibrateCamera(obj, corners.right, corners.image_size, K2, D2, rv, tv, cv::CALIB_FIX_K3);
   const double ref_rms = cv::stereoCalibrate(obj, corners.left, corners.right, K1, D1, K2, D2, corners.image_size, R, T,
                                              E, F, cv::CALIB_FIX_INTRINSIC);
   const double ref_baseline = cv::norm(T);

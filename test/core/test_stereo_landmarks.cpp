@@ -174,7 +174,9 @@ TEST(StereoLandmarks, LocalisationNoiseGrowsWithKeypointSize) {
     int count[3] = {0, 0, 0};
     for (size_t k = 0; k < l.size(); ++k) {
       const int c = l[k].size < 6 ? 0 : (l[k].size < 12 ? 1 : 2);
-      if (model) EXPECT_NEAR(std::sqrt(l[k].var_v), per_px * l[k].size, 0.25 * per_px * l[k].size) << l[k].size;
+      if (model) {
+        EXPECT_NEAR(std::sqrt(l[k].var_v), per_px * l[k].size, 0.25 * per_px * l[k].size) << l[k].size;
+      }
       const Eigen::Vector3d e = l[k].position - truth[k];
       nees[c] += e.dot(l[k].covariance.inverse() * e);
       ++count[c];

@@ -11,6 +11,7 @@
 #include <sys/wait.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cstdio>
@@ -48,6 +49,7 @@ struct Stats {
   std::vector<double> z2_normal;  // squared radial error / predicted radial variance
   std::vector<double> nees;       // 3D: truth = the true sphere point on the left keypoint's ray
   std::vector<double> nees_size;  // the keypoint size of each nees entry (px)
+  std::vector<double> nees_depth;  // the NEES's share along the covariance's major axis (~ the viewing ray)
   double rms_radial_mm = 0.0;
 };
 
@@ -72,6 +74,12 @@ Stats evaluate(const std::string& bag, const std::string& truth_path, stereo::Fe
   to.sigma_px = sigma_px;
   Stats s;
   double sum_sq = 0.0;
+  const char* dump_path = std::getenv("SKIN3D_ACCURACY_DUMP");
+  std::ofstream dump;
+  if (dump_path) {
+    dump.open(std::string(dump_path) + "_" + stereo::featureTypeName(type) + ".csv");
+    dump << "frame,ul,vl,ur,vr,size,strength,var_u,var_v,nees,nees_major,eu_r,ev_r,depth\n";
+  }
   for (size_t k = 0; k < limg.size(); ++k) {
     const auto matches = matcher.process(rect_l(ros_conv::toMono8(limg[k])), rect_r(ros_conv::toMono8(rimg[k])));
     const auto lms = stereo::triangulateMatches(L, R, matches, to);
@@ -98,6 +106,17 @@ Stats evaluate(const std::string& bag, const std::string& truth_path, stereo::Fe
       if (disc > 0.0) {
         const Eigen::Vector3d err = l.position - (-bq - std::sqrt(disc)) * ray;
         s.nees.push_back(err.dot(l.covariance.ldlt().solve(err)));
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(l.covariance);  // ascending eigenvalues
+        const double w = eig.eigenvectors().col(2).dot(err);
+        s.nees_depth.push_back(w * w / eig.eigenvalues()[2]);
+        if (dump_path) {
+          const Eigen::Vector3d Xt = L.R * ((-bq - std::sqrt(disc)) * ray);  // rectified-left frame
+          const Eigen::Vector3d pr = R.P * Xt.homogeneous();
+          dump << k << ',' << l.uv_left.x() << ',' << l.uv_left.y() << ',' << l.uv_right.x() << ',' << l.uv_right.y() << ','
+               << l.size << ',' << l.strength << ',' << l.var_u << ',' << l.var_v << ',' << s.nees.back() << ','
+               << s.nees_depth.back() << ',' << l.uv_right.x() - pr.x() / pr.z() << ',' << l.uv_right.y() - pr.y() / pr.z()
+               << ',' << Xt.z() << '\n';
+        }
         s.nees_size.push_back(l.size);
       }
     }
@@ -124,8 +143,16 @@ void report(const char* name, const Stats& s) {
   std::sort(q.begin(), q.end());
   const double nees_mean = std::accumulate(q.begin(), q.end(), 0.0) / std::max<size_t>(1, q.size());
   const double nees_tail = 100.0 * (q.end() - std::lower_bound(q.begin(), q.end(), 16.27)) / std::max<size_t>(1, q.size());
-  std::printf("%s: 3D NEES mean %.3f (chi2(3): 3), median %.3f (2.366), %.1f %% beyond 16.27 (0.1 %%)\n", name, nees_mean,
-              q.empty() ? 0.0 : q[q.size() / 2], nees_tail);
+  const double depth_mean =
+      std::accumulate(s.nees_depth.begin(), s.nees_depth.end(), 0.0) / std::max<size_t>(1, s.nees_depth.size());
+  const auto share = [&q](double lo, double hi) {
+    return 100.0 * (std::lower_bound(q.begin(), q.end(), hi) - std::lower_bound(q.begin(), q.end(), lo)) /
+           std::max<size_t>(1, q.size());
+  };
+  std::printf("%s: 3D NEES mean %.3f (chi2(3): 3), median %.3f (2.366), %.1f %% below 0.352 (5 %%), %.1f %% beyond 7.81 "
+              "(5 %%), %.1f %% beyond 16.27 (0.1 %%); along the major axis %.3f (1), across %.3f (2)\n",
+              name, nees_mean, q.empty() ? 0.0 : q[q.size() / 2], share(-1.0, 0.3518), share(7.815, 1e300), nees_tail,
+              depth_mean, nees_mean - depth_mean);
   std::printf("%s: landmarks/frame min %d median %d max %d; |radial error| median %.3f mm, 90%% %.3f mm, RMS %.1f mm; "
               "z2 = (radial error)^2 / predicted variance: median %.3f (chi2(1): 0.455), %.1f %% beyond 10.83 "
               "(chi2(1): 0.1 %%), mean of the rest %.3f (chi2(1) truncated: 0.99); %zu landmarks\n",
@@ -147,7 +174,9 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
   EXPECT_GE(*std::min_element(s.per_frame.begin(), s.per_frame.end()), 100) << "too few landmarks for SLAM";
 
   std::ofstream(tmp("exact.yaml")) << "images: {calibration_error: {enabled: false}}\n";
-  // CI: 6 frames of seed 1. The README's 40-frame, 3-seed figures: SKIN3D_ACCURACY_FRAMES=40 SKIN3D_ACCURACY_SEED=N.
+  // CI: 6 frames of seed 1. The README's 40-frame, 5-seed figures: SKIN3D_ACCURACY_FRAMES=40 SKIN3D_ACCURACY_SEED=N;
+  // SKIN3D_ACCURACY_DUMP=PREFIX also writes PREFIX_kaze.csv and PREFIX_akaze.csv, a row per landmark (pixels, size,
+  // strength, modelled variances, NEES, the right pixel's error against the truth projected, depth).
   const char* frames = std::getenv("SKIN3D_ACCURACY_FRAMES");
   const char* seed = std::getenv("SKIN3D_ACCURACY_SEED");
   ASSERT_EQ(run(std::string("globe-images --quiet --frames ") + (frames ? frames : "6") +
@@ -164,7 +193,8 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
     std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
     EXPECT_LT(a[a.size() / 2], 0.5) << stereo::featureTypeName(type);
     // No gross mismatch survives the gates: 10 mm off the sphere is > 5 px of disparity at 400 mm, more than
-    // 20 predicted sigmas anywhere on the globe.
+    // 20 predicted sigmas anywhere on the globe. (Not quite true: 40 frames of seed 3 have one, 10.09 mm, a right
+    // keypoint 8.6 px from the rectified image's border; see the issue notes.)
     EXPECT_LT(*std::max_element(e.abs_radial_mm.begin(), e.abs_radial_mm.end()), 10.0) << stereo::featureTypeName(type);
     // Covariance consistency (issue 4 bar, NOT fully met: see the issue notes). A consistent covariance gives a
     // 3D NEES averaging 3 with 0.1 % beyond the chi2(3) 99.9 % point 16.27. The front end's errors are

@@ -53,12 +53,15 @@ struct TriangulateOptions {
    *  vertical stays sigma^2) has b fitted per frame to the plane residuals (robust, binned by slant). true:
    *  on (needs > 2 neighbours and >= 50 matches; otherwise the isotropic sigma). */
   bool slant_noise = true;
-  /** Scale-dependent localisation noise. A keypoint found at a coarser scale is localised less precisely: the
-   *  model var = c0 + c1 size^2 (size = keypoint diameter, px) is fitted per frame to the row residuals binned by
-   *  size (robust; needs >= 50 matches whose sizes spread, otherwise the pooled sigma), clamped to
-   *  [min_sigma_px, max_sigma_px]^2. With it the slant term grows with the size too: var(u) = var + (b / 2)
-   *  (size / median size)^2 tan^2(theta), since the foreshortening difference between the views moves a larger
-   *  keypoint further. Only with an estimated sigma (sigma_px 0). false: one sigma for every match. */
+  /** Scale- and slant-dependent localisation noise. A keypoint found at a coarser scale is localised less
+   *  precisely, and so is one on a slanted (foreshortened) surface: the model
+   *  var = c0 + c1 (size / median size)^2 + c2 (size / median size)^2 tan^2(theta) (size = keypoint diameter, px;
+   *  theta from the local disparity surface as for slant_noise, the last term only with slant_noise) is fitted
+   *  per frame by least squares to the squared row residuals (a second moment: the NEES is one; slopes kept
+   *  >= 0; needs >= 50 matches, otherwise the pooled sigma), clamped to [min_sigma_px, max_sigma_px]^2. With it
+   *  the slant term of var(u) grows with the size too: var(u) = var + (b / 2) (size / median size)^2
+   *  tan^2(theta), since the foreshortening difference between the views moves a larger keypoint further. Only
+   *  with an estimated sigma (sigma_px 0). false: one sigma for every match. */
   bool size_noise = true;
   double min_depth = 0.05;        //!< m; matches triangulated nearer are dropped
   double max_depth = 5.0;         //!< m; farther ones too (tiny disparity: useless depth)

@@ -126,30 +126,53 @@ void localPlanes(const std::vector<StereoMatch>& m, const std::vector<size_t>& k
   }
 }
 
-// Localisation variance against keypoint scale, var(s) = c0 + c1 s^2 (s = keypoint diameter), fitted by least
-// squares to the squared row residuals (v_l - v_r)^2 / 2 of the matches that passed the row gate (each residual is
-// the difference of two localisation errors). A second moment on purpose: the NEES a covariance must match is one,
-// and the row residuals are heavy-tailed, so a median-based spread would make the covariances too small.
-// False (keep the pooled sigma) with fewer than 50 matches or when the sizes do not spread (ORB's fixed patch).
-bool fitSizeNoise(const std::vector<double>& dv, const std::vector<double>& size, double* c0, double* c1) {
+// Localisation variance model var = sum_j c_j phi_j (phi_0 = 1), fitted by least squares to the squared row
+// residuals (v_l - v_r)^2 / 2 of the matches that passed the row gate (each residual is the difference of two
+// localisation errors). A second moment on purpose: the NEES a covariance must match is one, and the row
+// residuals are heavy-tailed, so a median-based spread would make the covariances too small. The slopes
+// c_1.. are kept >= 0: a regressor whose slope comes out negative is dropped and the rest refitted, and so is
+// one that does not spread (max < 1.5 min + 1e-12: ORB's fixed patch size, or no slant measured). False with
+// fewer than 50 residuals (keep the pooled sigma).
+bool fitVarianceModel(const std::vector<double>& dv, const std::vector<std::vector<double>>& phi, std::vector<double>* c) {
   const size_t n = dv.size();
-  if (n < 50) return false;
-  Eigen::Matrix2d N = Eigen::Matrix2d::Zero();
-  Eigen::Vector2d g = Eigen::Vector2d::Zero();
-  double s2_min = 1e300, s2_max = -1e300;
-  for (size_t i = 0; i < n; ++i) {
-    const double x = size[i] * size[i];
-    s2_min = std::min(s2_min, x);
-    s2_max = std::max(s2_max, x);
-    N += Eigen::Vector2d(1.0, x) * Eigen::RowVector2d(1.0, x);
-    g += Eigen::Vector2d(1.0, x) * (0.5 * dv[i] * dv[i]);
+  if (n < 50 || phi.empty()) return false;
+  const size_t p = phi[0].size();
+  std::vector<bool> active(p, true);
+  for (size_t j = 1; j < p; ++j) {
+    double mn = 1e300, mx = -1e300;
+    for (size_t i = 0; i < n; ++i) {
+      mn = std::min(mn, phi[i][j]);
+      mx = std::max(mx, phi[i][j]);
+    }
+    active[j] = mx > 1.5 * mn + 1e-12;
   }
-  if (!(s2_max > 1.5 * s2_min)) return false;
-  const Eigen::Vector2d c = N.ldlt().solve(g);
-  if (!c.allFinite()) return false;
-  *c1 = std::max(0.0, c[1]);
-  *c0 = c[1] > 0.0 ? c[0] : g[0] / N(0, 0);  // no growth with size: the pooled mean square
-  return true;
+  for (int iter = 0; iter < static_cast<int>(p); ++iter) {
+    std::vector<size_t> idx;
+    for (size_t j = 0; j < p; ++j)
+      if (active[j]) idx.push_back(j);
+    Eigen::MatrixXd N = Eigen::MatrixXd::Zero(idx.size(), idx.size());
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(idx.size());
+    for (size_t i = 0; i < n; ++i) {
+      Eigen::VectorXd f(idx.size());
+      for (size_t q = 0; q < idx.size(); ++q) f[q] = phi[i][idx[q]];
+      N += f * f.transpose();
+      g += f * (0.5 * dv[i] * dv[i]);
+    }
+    const Eigen::VectorXd sol = N.ldlt().solve(g);
+    if (!sol.allFinite()) return false;
+    bool neg = false;
+    for (size_t q = 1; q < idx.size(); ++q)
+      if (sol[q] < 0.0) {
+        active[idx[q]] = false;
+        neg = true;
+      }
+    if (!neg) {
+      c->assign(p, 0.0);
+      for (size_t q = 0; q < idx.size(); ++q) (*c)[idx[q]] = sol[q];
+      return true;
+    }
+  }
+  return false;
 }
 
 // Disparity variance model var_d(t) = a + b t^2 (t = tan of the surface slant) fitted robustly to the plane
@@ -236,48 +259,62 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
     else
       kept.push_back(i);
   }
-  // Scale-dependent localisation noise (see TriangulateOptions::size_noise), from the kept matches' row residuals.
+  // The local disparity surface of each kept match (slant), needed by both noise models below.
+  const int k = options.neighbours;
+  const bool have_planes = options.slant_noise && k >= 3 && kept.size() > static_cast<size_t>(2 * k);
+  std::vector<double> res, t2(kept.size(), 0.0);
+  if (have_planes) {
+    std::vector<Eigen::Vector2d> grad;
+    localPlanes(matches, kept, k, &res, &grad);
+    const double f = left.P(0, 0), offset = left.P(0, 2) - right.P(0, 2);
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      const StereoMatch& m = matches[kept[ii]];
+      const double d = std::max(0.5, m.left.x() - m.right.x() - offset);
+      t2[ii] = std::pow(grad[ii].norm() * f / d, 2);
+    }
+  }
+  std::vector<double> sz(kept.size());
+  for (size_t ii = 0; ii < kept.size(); ++ii) sz[ii] = matches[kept[ii]].size;
+  double size_ref = 1.0;
+  // Scale- and slant-dependent localisation noise (see TriangulateOptions::size_noise), from the kept matches'
+  // row residuals: var = c0 + c1 (s / s_med)^2 + c2 (s / s_med)^2 tan^2(theta).
   std::vector<double> var_v(kept.size(), sigma * sigma);
   bool size_model = false;
   if (options.size_noise && options.sigma_px == 0.0 && kept.size() >= 50) {
-    std::vector<double> dv(kept.size()), sz(kept.size());
-    for (size_t ii = 0; ii < kept.size(); ++ii) {
+    std::vector<double> dv(kept.size());
+    for (size_t ii = 0; ii < kept.size(); ++ii)
       dv[ii] = matches[kept[ii]].left.y() - matches[kept[ii]].right.y() - median_dv;
-      sz[ii] = matches[kept[ii]].size;
+    std::vector<double> tmp = sz;
+    std::nth_element(tmp.begin(), tmp.begin() + tmp.size() / 2, tmp.end());
+    size_ref = tmp[tmp.size() / 2] > 0.0 ? tmp[tmp.size() / 2] : 1.0;
+    std::vector<std::vector<double>> phi(kept.size());
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      const double rel2 = std::pow(sz[ii] / size_ref, 2);
+      phi[ii] = {1.0, rel2, rel2 * t2[ii]};  // t2 = 0 without the local planes: the slant column is dropped
     }
-    double c0 = 0.0, c1 = 0.0;
-    if (fitSizeNoise(dv, sz, &c0, &c1)) {
+    std::vector<double> c;
+    if (fitVarianceModel(dv, phi, &c)) {
       size_model = true;
       const double lo = options.min_sigma_px * options.min_sigma_px, hi = options.max_sigma_px * options.max_sigma_px;
-      for (size_t ii = 0; ii < kept.size(); ++ii) var_v[ii] = std::min(hi, std::max(lo, c0 + c1 * sz[ii] * sz[ii]));
+      for (size_t ii = 0; ii < kept.size(); ++ii) {
+        double v = 0.0;
+        for (size_t j = 0; j < c.size(); ++j) v += c[j] * phi[ii][j];
+        var_v[ii] = std::min(hi, std::max(lo, v));
+      }
     }
   }
   // Slant-dependent disparity noise (see TriangulateOptions::slant_noise).
   std::vector<double> var_u = var_v;
-  const int k = options.neighbours;
-  if (options.slant_noise && k >= 3 && kept.size() > static_cast<size_t>(2 * k)) {
-    std::vector<double> res, x(kept.size());
-    std::vector<Eigen::Vector2d> grad;
-    localPlanes(matches, kept, k, &res, &grad);
-    const double f = left.P(0, 0), offset = left.P(0, 2) - right.P(0, 2);
+  if (have_planes) {
     // The foreshortening that differs between the two views moves a keypoint in proportion to its size: the
     // slant variable is (size / median size)^2 tan^2(theta) when the size model is on, tan^2(theta) otherwise.
-    double size_ref = 1.0;
-    if (size_model) {
-      std::vector<double> sz;
-      for (size_t i : kept) sz.push_back(matches[i].size);
-      std::nth_element(sz.begin(), sz.begin() + sz.size() / 2, sz.end());
-      size_ref = sz[sz.size() / 2] > 0.0 ? sz[sz.size() / 2] : 1.0;
-    }
+    std::vector<double> x(kept.size()), xi(kept.size());
     for (size_t ii = 0; ii < kept.size(); ++ii) {
-      const StereoMatch& m = matches[kept[ii]];
-      const double d = std::max(0.5, m.left.x() - m.right.x() - offset);
-      const double rel = size_model && m.size > 0.0 ? m.size / size_ref : 1.0;
-      x[ii] = std::pow(rel * grad[ii].norm() * f / d, 2);
+      const double rel = size_model && sz[ii] > 0.0 ? sz[ii] / size_ref : 1.0;
+      x[ii] = rel * rel * t2[ii];
     }
     // var_d,i = 2 var_v,i + b x_i. Normalised by each match's own noise, r_i^2 / (2 var_v,i) = 1 + b xi_i with
     // xi_i = x_i / (2 var_v,i): the fit's slope is b (its intercept, ~1, is not used).
-    std::vector<double> xi(kept.size());
     for (size_t ii = 0; ii < kept.size(); ++ii) {
       res[ii] /= std::sqrt(2.0 * var_v[ii]);
       xi[ii] = x[ii] / (2.0 * var_v[ii]);

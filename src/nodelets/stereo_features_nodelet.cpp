@@ -10,7 +10,8 @@
  * Parameters: ~feature_type (kaze | akaze | orb, kaze), ~threshold (0.001), ~max_features (3000),
  *             ~octaves (4), ~octave_layers (4) of the KAZE/AKAZE scale space (fewer: faster, fewer features),
  *             ~ratio (0.8), ~max_row_diff (px, 1.5), ~min_disparity (px, 0.5), ~max_disparity (px, 1e9),
- *             ~cross_check (true), ~queue_size (5), ~approximate_sync (false).
+ *             ~cross_check (true), ~border_margin (keypoint diameters, 1), ~queue_size (5),
+ *             ~approximate_sync (false).
  * Bad input (empty/black/textureless images, sizes, encodings, no features, no matches) drops the frame
  * with a throttled warning; the nodelet keeps running.
  */
@@ -53,6 +54,7 @@ class StereoFeaturesNodelet : public nodelet::Nodelet {
     pnh.param("min_disparity", o.min_disparity, o.min_disparity);
     pnh.param("max_disparity", o.max_disparity, o.max_disparity);
     pnh.param("cross_check", o.cross_check, o.cross_check);
+    pnh.param("border_margin", o.border_margin, o.border_margin);
     try {
       o.type = stereo::parseFeatureType(type);
       matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(o);

@@ -190,6 +190,8 @@ TEST(FeatureOptions, BadValuesThrowNamingTheFieldAndValue) {
        },
        "threshold", "300"},
       {[](FeatureOptions& o) { o.type = static_cast<FeatureType>(7); }, "type", "7"},
+      {[](FeatureOptions& o) { o.border_margin = -1; }, "border_margin", "-1"},
+      {[nan](FeatureOptions& o) { o.border_margin = nan; }, "border_margin", "nan"},
   };
   for (const auto& c : cases) {
     FeatureOptions o;
@@ -287,6 +289,32 @@ TEST(StereoMatching, CrossCheckKeepsOnlyMutualBestMatches) {
   o.cross_check = true;
   const ImageFeatures left2 = makeFeatures({{300, 50}, {320, 53}}, {{1, 0, 0}, {1, 0.06f, 0}});
   EXPECT_EQ(StereoFeatureMatcher(o).match(left2, right).size(), 1u);
+}
+
+// A match whose keypoint is nearer its image's border than the larger keypoint diameter is dropped (on the rendered
+// globe a left feature whose true partner lay 2.9 px from the right image's edge, where the detector sees nothing,
+// took the only candidate 5.7 px away, with strength 1).
+TEST(StereoMatching, MatchesNearTheImageBorderAreDropped) {
+  FeatureOptions o;
+  ImageFeatures left = makeFeatures({{300, 50}, {212, 100}, {400, 474}, {500, 200}}, {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}});
+  ImageFeatures right = makeFeatures({{280, 50}, {8, 100}, {380, 474}, {480, 200}}, {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}});
+  right.keypoints[3].size = 25.0f;  // the larger diameter counts: 480 is 159 px from the right edge, 200 px rows: kept
+  left.image_size = right.image_size = cv::Size(640, 480);
+  MatchStats st;
+  auto matches = StereoFeatureMatcher(o).match(left, right, &st);
+  ASSERT_EQ(matches.size(), 2u);  // right x = 8 < 10 (diameter) and left y = 474 > 479 - 10 are dropped
+  EXPECT_DOUBLE_EQ(matches[0].left.x(), 300.0);
+  EXPECT_DOUBLE_EQ(matches[1].left.x(), 500.0);
+  EXPECT_EQ(st.border_rejected, 2);
+  right.keypoints[3].size = 50.0f;  // now 200 - 50 < 0? no: y = 200 >= 50; x = 480 <= 639 - 50: still kept
+  EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 2u);
+  right.keypoints[3].size = 210.0f;  // y = 200 < 210: cut
+  EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 1u);
+  o.border_margin = 0.0;  // off
+  EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 4u);
+  o.border_margin = 1.0;
+  left.image_size = right.image_size = cv::Size();  // unknown image size (hand-made features): nothing to test
+  EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 4u);
 }
 
 TEST(StereoMatching, BinaryDescriptorsUseHammingAndExpandToBits) {

@@ -40,6 +40,11 @@ struct FeatureOptions {
   double max_disparity = 1e9;     //!< px
   double disparity_offset = 0.0;  //!< px, cx_left - cx_right of the rectified P matrices
   bool cross_check = true;
+  /** A match is dropped when either keypoint lies closer to its image's border than border_margin times the
+   *  larger of the two keypoint diameters: the support of the correspondence is cut there, and the true partner
+   *  of a left feature near the right image's edge may lie where the detector cannot see it, leaving a wrong
+   *  single candidate (0 = keep all; needs ImageFeatures::image_size, which detect() sets). */
+  double border_margin = 1.0;
   /** @throws std::invalid_argument naming a bad field and its value. */
   void validate() const;
 };
@@ -48,6 +53,7 @@ struct FeatureOptions {
 struct ImageFeatures {
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;            //!< one row per keypoint (CV_32F for KAZE/AKAZE-float, CV_8U for binary)
+  cv::Size image_size;            //!< of the image they were found in (set by detect(); empty: unknown)
 };
 
 /** @brief One left-right correspondence on the rectified pair. */
@@ -64,6 +70,7 @@ struct MatchStats {
   int left_features = 0, right_features = 0;
   int candidates = 0;             //!< left features with at least one row/disparity candidate
   int ratio_rejected = 0, cross_rejected = 0;
+  int border_rejected = 0;        //!< matches dropped by FeatureOptions::border_margin
   int matches = 0;
 };
 

@@ -302,6 +302,8 @@ void FeatureOptions::validate() const {
   if (std::isnan(max_disparity) || max_disparity < min_disparity)
     badOption("max_disparity", max_disparity, "must be >= min_disparity = " + num(min_disparity));
   if (!std::isfinite(disparity_offset)) badOption("disparity_offset", disparity_offset, "must be finite (px)");
+  if (!(border_margin >= 0) || !std::isfinite(border_margin))
+    badOption("border_margin", border_margin, "must be a finite number >= 0 (keypoint diameters)");
 }
 
 StereoFeatureMatcher::StereoFeatureMatcher(const FeatureOptions& options) : options_(options) {
@@ -312,6 +314,7 @@ ImageFeatures StereoFeatureMatcher::detect(const cv::Mat& image) const {
   ImageFeatures f;
   const cv::Mat gray = toGray8(image, "StereoFeatureMatcher::detect");
   if (gray.empty()) return f;
+  f.image_size = gray.size();
   double mn = 0, mx = 0;
   cv::minMaxLoc(gray, &mn, &mx);
   if (mn == mx) return f;  // no contrast, no features (KAZE's contrast factor would be 0)
@@ -416,6 +419,16 @@ std::vector<StereoMatch> StereoFeatureMatcher::match(const ImageFeatures& left, 
     if (o.cross_check && bestLeftOf(best_r) != l) {
       ++st.cross_rejected;
       continue;
+    }
+    if (o.border_margin > 0.0) {
+      const double margin = o.border_margin * std::max(kl[l].size, kr[best_r].size);
+      const auto cut = [margin](const cv::Point2f& p, const cv::Size& s) {
+        return !s.empty() && (p.x < margin || p.y < margin || p.x > s.width - 1 - margin || p.y > s.height - 1 - margin);
+      };
+      if (cut(kl[l].pt, left.image_size) || cut(kr[best_r].pt, right.image_size)) {
+        ++st.border_rejected;
+        continue;
+      }
     }
     StereoMatch m;
     m.left = Eigen::Vector2d(kl[l].pt.x, kl[l].pt.y);

@@ -48,8 +48,9 @@ struct TriangulateOptions {
   int neighbours = 12;
   /** Slant-dependent disparity noise. A feature on a surface slanted by theta from the viewing direction is
    *  foreshortened differently in the two images and its horizontal localisation error grows with tan(theta).
-   *  The slant of each match is measured from the local disparity gradient of its neighbours' plane,
-   *  tan(theta) ~ |grad d| f / d; the model var(u) = sigma^2 + (b / 2) tan^2(theta) (per image, horizontal; the
+   *  The slant of each match is measured from the local disparity gradient of a quadratic through its neighbours'
+   *  disparities, tan(theta) ~ |grad d| f / d, and smoothed (the median over the match and its neighbours: one
+   *  local gradient is noisy, and a noisy regressor flattens the fitted slopes); the model var(u) = sigma^2 + (b / 2) tan^2(theta) (per image, horizontal; the
    *  vertical stays sigma^2) has b fitted per frame to the plane residuals (robust, binned by slant). true:
    *  on (needs > 2 neighbours and >= 50 matches; otherwise the isotropic sigma). */
   bool slant_noise = true;

@@ -102,10 +102,11 @@ std::vector<bool> disparityOutliers(const std::vector<StereoMatch>& m, int k, do
 // neighbours' disparities (left image: a plane would leave the surface's curvature in the residuals), and that
 // surface's disparity gradient at the match (px per px).
 void localPlanes(const std::vector<StereoMatch>& m, const std::vector<size_t>& kept, int k, std::vector<double>* residual,
-                 std::vector<Eigen::Vector2d>* gradient) {
+                 std::vector<Eigen::Vector2d>* gradient, std::vector<std::vector<size_t>>* neighbours) {
   const size_t n = kept.size();
   residual->assign(n, 0.0);
   gradient->assign(n, Eigen::Vector2d::Zero());
+  neighbours->assign(n, std::vector<size_t>(k));
   std::vector<std::pair<double, size_t>> nb(n);
   Eigen::MatrixXd A(k, 6);
   Eigen::VectorXd b(k);
@@ -116,6 +117,7 @@ void localPlanes(const std::vector<StereoMatch>& m, const std::vector<size_t>& k
     const double scale = std::sqrt(std::max(1.0, nb[k].first));  // conditioning of the quadratic terms
     for (int q = 0; q < k; ++q) {
       const StereoMatch& o = m[kept[nb[q + 1].second]];
+      (*neighbours)[ii][q] = nb[q + 1].second;
       const double x = (o.left.x() - mi.left.x()) / scale, y = (o.left.y() - mi.left.y()) / scale;
       A.row(q) << 1.0, x, y, x * x, x * y, y * y;
       b[q] = o.left.x() - o.right.x();
@@ -265,12 +267,23 @@ std::vector<StereoLandmark> triangulateMatches(const geometry::CameraInfo& left,
   std::vector<double> res, t2(kept.size(), 0.0);
   if (have_planes) {
     std::vector<Eigen::Vector2d> grad;
-    localPlanes(matches, kept, k, &res, &grad);
+    std::vector<std::vector<size_t>> nb;
+    localPlanes(matches, kept, k, &res, &grad, &nb);
     const double f = left.P(0, 0), offset = left.P(0, 2) - right.P(0, 2);
+    std::vector<double> tan_raw(kept.size());
     for (size_t ii = 0; ii < kept.size(); ++ii) {
       const StereoMatch& m = matches[kept[ii]];
       const double d = std::max(0.5, m.left.x() - m.right.x() - offset);
-      t2[ii] = std::pow(grad[ii].norm() * f / d, 2);
+      tan_raw[ii] = grad[ii].norm() * f / d;
+    }
+    // The slant varies smoothly over the surface, the gradient of one local quadratic is noisy (and a noisy
+    // regressor flattens the fitted slopes): each match takes the median over itself and its neighbours.
+    std::vector<double> w(k + 1);
+    for (size_t ii = 0; ii < kept.size(); ++ii) {
+      w[0] = tan_raw[ii];
+      for (int q = 0; q < k; ++q) w[q + 1] = tan_raw[nb[ii][q]];
+      std::nth_element(w.begin(), w.begin() + k / 2, w.end());
+      t2[ii] = w[k / 2] * w[k / 2];
     }
   }
   std::vector<double> sz(kept.size());

@@ -306,7 +306,7 @@ TEST(StereoMatching, MatchesNearTheImageBorderAreDropped) {
   EXPECT_DOUBLE_EQ(matches[0].left.x(), 300.0);
   EXPECT_DOUBLE_EQ(matches[1].left.x(), 500.0);
   EXPECT_EQ(st.border_rejected, 2);
-  right.keypoints[3].size = 50.0f;  // now 200 - 50 < 0? no: y = 200 >= 50; x = 480 <= 639 - 50: still kept
+  right.keypoints[3].size = 50.0f;  // 50 px margin: y = 200 and x = 480 are still inside it, kept
   EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 2u);
   right.keypoints[3].size = 210.0f;  // y = 200 < 210: cut
   EXPECT_EQ(StereoFeatureMatcher(o).match(left, right).size(), 1u);

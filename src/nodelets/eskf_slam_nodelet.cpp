@@ -205,7 +205,7 @@ class EskfSlamNodelet : public nodelet::Nodelet {
                                  "covariance that is not symmetric positive definite, or a point behind the camera",
                             st.rejected_invalid, st.measurements);
     const auto& x = slam_->filter().state();
-    run_.trajectory.push_back({t, x.p, x.q});
+    run_.trajectory.push_back({t, static_cast<std::int64_t>(msg->header.stamp.toNSec()), x.p, x.q});
     run_.rows.push_back(slam::stateRow(*slam_, st));
     publish(msg->header.stamp, st);
     if (run_.trajectory.size() == 1) anchorGroundTruth();
@@ -228,6 +228,7 @@ class EskfSlamNodelet : public nodelet::Nodelet {
     }
     slam::StampedPose s;
     s.t = t;
+    s.stamp_ns = static_cast<std::int64_t>(msg->header.stamp.toNSec());
     s.p = Eigen::Vector3d(p.x, p.y, p.z);
     s.q = q.normalized();
     truth_.push_back(s);
@@ -264,13 +265,15 @@ class EskfSlamNodelet : public nodelet::Nodelet {
     const Eigen::Vector3d p = truth_p_ + truth_q_ * g.p;
     const Eigen::Quaterniond q = (truth_q_ * g.q).normalized();
     geometry_msgs::PoseStamped ps;
-    ps.header.stamp.fromSec(g.t);
+    if (g.stamp_ns >= 0) ps.header.stamp.fromNSec(static_cast<std::uint64_t>(g.stamp_ns));
+    else ps.header.stamp.fromSec(g.t);
     ps.header.frame_id = world_frame_;
     ps.pose = ros_conv::toPoseMsg(p, q);
     truth_path_.header = ps.header;
     truth_path_.poses.push_back(ps);
     slam::StampedPose aligned;  // for the results: ground_truth.tum and the ATE in summary.yaml
     aligned.t = g.t;
+    aligned.stamp_ns = g.stamp_ns;
     aligned.p = p;
     aligned.q = q;
     run_.ground_truth.push_back(aligned);

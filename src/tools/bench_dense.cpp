@@ -43,6 +43,7 @@
 #include <string>
 #include <vector>
 
+#include "skin3d/ros/bag_topics.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message -> core struct
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/dense_stereo.h"
@@ -54,7 +55,8 @@ using namespace skin3d;
 using Clock = std::chrono::steady_clock;
 
 const char* kUsage =
-    "usage: bench_dense --bag WORKPIECE.bag [--frames N] [--roi-mp MP] [--z-range ZMIN ZMAX] [--no-full]\n"
+    "usage: bench_dense --bag WORKPIECE.bag [--frames N] [--roi-mp MP] [--z-range ZMIN ZMAX] [--no-full] [--ns NS]\n"
+    "  --ns NAMESPACE   the bag's topics are under this namespace (default: the root, or the only one)\n"
     "  --bag FILE        a workpiece bag (make_dataset workpiece): stereo/{left,right}/image_raw and camera_info\n"
     "  --frames N        time the first N stereo pairs (default 1); the table gives the median per pair\n"
     "  --roi-mp MP       size of the regions (image centre, textured area), megapixels (default 1; 0 = none)\n"
@@ -157,6 +159,7 @@ void plainSgbm(const cv::Mat& left, const cv::Mat& right, const cv::Rect& roi, d
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string bag_ns;  // "" = the root, or the one namespace holding the stereo topics
   std::string bag_path;
   long frames_wanted = 1;
   double roi_mp = 1.0, z_min = 0.18, z_max = 0.40;
@@ -170,6 +173,8 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--bag" && has_value) {
       bag_path = argv[++i];
+    } else if (a == "--ns" && has_value) {
+      bag_ns = argv[++i];
     } else if (a == "--frames" && has_value) {
       frames_wanted = std::strtol(argv[++i], &end, 10);
       if (!end || *end || frames_wanted < 1) {
@@ -215,14 +220,15 @@ int main(int argc, char** argv) {
   bool have_li = false, have_ri = false;
   try {
     rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw",
-                                             "stereo/left/camera_info", "stereo/right/camera_info"};
-    rosbag::View view(bag, rosbag::TopicQuery(topics));
+    const ros_io::BagTopics topics(bag, bag_path,
+                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                                    "stereo/right/camera_info"},
+                                   bag_ns);
+    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
     std::map<ros::Time, std::pair<cv::Mat, cv::Mat>> pending;
     for (const rosbag::MessageInstance& m : view) {
       if (static_cast<long>(frames.size()) >= frames_wanted && have_li && have_ri) break;
-      std::string topic = m.getTopic();
-      if (!topic.empty() && topic[0] == '/') topic = topic.substr(1);
+      const std::string topic = topics.relative(m.getTopic());
       if (topic == "stereo/left/camera_info" && !have_li) {
         li = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
         have_li = true;

@@ -40,6 +40,7 @@
 #include <thread>
 #include <vector>
 
+#include "skin3d/ros/bag_topics.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/features.h"
@@ -52,7 +53,8 @@ using namespace skin3d;
 using Clock = std::chrono::steady_clock;
 
 const char* kUsage =
-    "usage: bench_frontend --bag FILE.bag [--frames N] [--features kaze|akaze|orb|all]\n"
+    "usage: bench_frontend --bag FILE.bag [--frames N] [--features kaze|akaze|orb|all] [--ns NS]\n"
+    "  --ns NAMESPACE   the bag's topics are under this namespace (default: the root, or the only one)\n"
     "  --bag FILE.bag   a globe-images bag: stereo/{left,right}/image_raw (mono8) and camera_info\n"
     "  --frames N       only the first N stereo pairs (default: all)\n"
     "  --features T     kaze, akaze, orb or all (default: all)\n"
@@ -200,6 +202,7 @@ std::string fixed(double v, int digits) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string bag_ns;  // "" = the root, or the one namespace holding the stereo topics
   std::string bag_path, features = "all";
   long frames_wanted = -1;
   int octaves = 4, layers = 4;
@@ -211,6 +214,8 @@ int main(int argc, char** argv) {
       return 0;
     } else if (a == "--bag" && has_value) {
       bag_path = argv[++i];
+    } else if (a == "--ns" && has_value) {
+      bag_ns = argv[++i];
     } else if (a == "--features" && has_value) {
       features = argv[++i];
     } else if ((a == "--octaves" || a == "--layers") && has_value) {
@@ -253,14 +258,15 @@ int main(int argc, char** argv) {
   bool have_left_info = false, have_right_info = false;
   try {
     rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw",
-                                             "stereo/left/camera_info", "stereo/right/camera_info"};
-    rosbag::View view(bag, rosbag::TopicQuery(topics));
+    const ros_io::BagTopics topics(bag, bag_path,
+                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                                    "stereo/right/camera_info"},
+                                   bag_ns);
+    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
     std::map<ros::Time, RawPair> pending;
     for (const rosbag::MessageInstance& m : view) {
       if (frames_wanted > 0 && static_cast<long>(frames.size()) >= frames_wanted) break;
-      std::string topic = m.getTopic();
-      if (!topic.empty() && topic[0] == '/') topic = topic.substr(1);
+      const std::string topic = topics.relative(m.getTopic());
       if (topic == "stereo/left/camera_info" && !have_left_info) {
         left_info = fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
         have_left_info = true;

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
- * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--quiet]
+ * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--quiet]
  *
  * Generates a simulated dataset (DESIGN.md "Datasets") as a rosbag, deterministically from the seed,
  * without a ROS master, plus FILE.truth.yaml beside it (and FILE.map.csv, the landmarks with their descriptors, for
@@ -39,19 +39,20 @@ namespace {
 using namespace skin3d;
 
 const char* kUsage =
-    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--quiet]\n"
+    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--quiet]\n"
     "  KIND            globe-landmarks | globe-images | workpiece\n"
     "  --out FILE.bag  the bag to write; the ground truth goes to FILE.truth.yaml beside it\n"
     "  --seed N        random seed (default 1, or the config's seed); same seed + config = same data\n"
     "  --config FILE   YAML overrides of the defaults (config/datasets/globe.yaml, workpiece.yaml)\n"
     "  --ideal         no realism (blur, vignetting, photometry, noise) and an exact calibration\n"
     "  --frames N      only the first N frames (quick tests)\n"
+    "  --start SECONDS stamp of the first frame (default 1000; e.g. 1700000000 for epoch stamps as a recording has)\n"
     "  --quiet         no progress output\n";
 
 const std::string kLeftFrame = "stereo_left_optical_frame";
 const std::string kRightFrame = "stereo_right_optical_frame";
 const std::string kWorldFrame = "world";
-const ros::Time kStart(1000.0);  // a fixed, valid ROS time: bags are deterministic
+ros::Time g_start(1000.0);  // the first stamp (--start): a fixed, valid ROS time, so that bags are deterministic
 
 struct Options {
   std::string kind, out, config;
@@ -207,7 +208,7 @@ void writeImu(rosbag::Bag& bag, const sim::GlobeSimulator& s, double t_end) {
     if (g.t >= t_end) break;
     sensor_msgs::Imu m;
     m.header.frame_id = kLeftFrame;  // the rig frame is the left optical frame
-    m.header.stamp = kStart + ros::Duration(g.t);
+    m.header.stamp = g_start + ros::Duration(g.t);
     m.orientation.w = 1.0;
     m.orientation_covariance[0] = -1.0;  // no orientation
     m.angular_velocity.x = g.omega.x();
@@ -249,7 +250,7 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
   int min_lm = 1 << 30, max_lm = 0;
   for (int k = 0; k < frames; ++k) {
     const double t = s.stamp(k);
-    const ros::Time stamp = kStart + ros::Duration(t);
+    const ros::Time stamp = g_start + ros::Duration(t);
     const Eigen::Isometry3d T_W_L = s.poseWorldLeft(t);
     bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
     bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
@@ -383,7 +384,7 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
               << " s" << std::endl;
   Progress progress("exposures", frames, quiet);
   for (int k = 0; k < frames; ++k) {
-    const ros::Time stamp = kStart + ros::Duration(k / w.fps);
+    const ros::Time stamp = g_start + ros::Duration(k / w.fps);
     const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
     bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
     bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
@@ -459,6 +460,15 @@ bool parseArgs(int argc, char** argv, Options* o) {
         o->seed = n;
       else
         o->frames = static_cast<int>(std::min<long long>(n, 1 << 30));
+    } else if (a == "--start" && has_value) {
+      const std::string v = argv[++i];
+      char* end = nullptr;
+      const double t = std::strtod(v.c_str(), &end);
+      if (v.empty() || *end != '\0' || !(t > 0.0) || t > 4.0e9) {
+        std::cerr << "make_dataset: --start takes seconds in (0, 4e9] (a ROS time), got '" << v << "'\n";
+        return false;
+      }
+      g_start = ros::Time(t);
     } else if (a == "--ideal") {
       o->ideal = true;
     } else if (a == "--quiet") {

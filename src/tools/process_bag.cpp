@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
  * process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map MAP.csv]
- *             [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--quiet]
+ *             [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--ns NAMESPACE]
+ *             [--input auto|images|landmarks] [--ate-align auto|none|first_pose|se3] [--ate-max-dt S] [--quiet]
  *
  * Runs a recorded or simulated session through the same core code as the nodelets, without a ROS master,
  * as fast as the CPU allows: landmark bags (stereo/landmarks) go straight into the ES-EKF SLAM, image bags
@@ -19,6 +20,12 @@
  * matched and measured (process_bag_induration.cpp); --config / --set then take the keys of
  * config/induration.yaml. Writes induration.yaml, height_map.png and surface.ply.
  *
+ * Bags recorded by others: topics are found under their relative names (stereo/landmarks), absolute names
+ * (/stereo/landmarks, as `rosbag record -a` writes them) or a namespace (/rig1/stereo/landmarks; --ns rig1, or
+ * found when it is the only one); when nothing matches, the error lists the bag's topics. A bag with both the
+ * raw images and the front end's stereo/landmarks (record -a of a running rig) is processed from the images
+ * (--input landmarks replays the recorded landmarks instead).
+ *
  * Exit codes: 0 ok, 1 bad configuration or data, 2 bad command line, 3 cannot write the output.
  */
 #include <geometry_msgs/PoseStamped.h>
@@ -30,6 +37,7 @@
 #include <skin3d/LandmarkArray.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -41,6 +49,7 @@
 
 #include "conversions.h"  // src/nodelets
 #include "process_bag_induration.h"
+#include "skin3d/ros/bag_topics.h"
 #include "run_info.h"
 #include "stereo_pairs.h"
 #include "skin3d/geometry/sphere_fit.h"
@@ -57,7 +66,8 @@ using namespace skin3d;
 
 const char* kUsage =
     "usage: process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map MAP.csv]\n"
-    "                   [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--quiet]\n"
+    "                   [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--ns NAMESPACE]\n"
+    "                   [--input auto|images|landmarks] [--ate-align auto|none|first_pose|se3] [--quiet]\n"
     "  --bag        dataset or recorded session (stereo/landmarks, or stereo/*/image_raw + camera_info)\n"
     "  --out        results directory (created)\n"
     "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win)\n"
@@ -66,11 +76,19 @@ const char* kUsage =
     "  --features   front end for image bags (default kaze; akaze/orb also set max_descriptor_distance 5.5)\n"
     "  --frames     process at most N frames\n"
     "  --set        override one SLAM parameter (repeatable)\n"
+    "  --ns         the bag's topics are under this namespace (e.g. rig1 for /rig1/stereo/...; '/' = the root);\n"
+    "               default: the root, or the one namespace that holds skin3d's topics\n"
+    "  --input      auto (default: the images when the bag has them, else stereo/landmarks) | images | landmarks\n"
+    "  --ate-align  how the ground truth is aligned for summary.yaml's ate: auto (default: none when its world is\n"
+    "               the SLAM's, i.e. its first pose is the first estimate's, else se3) | none | first_pose | se3;\n"
+    "               ate_se3 (SE(3)-aligned, as evo_ape --align) is always written too\n"
+    "  --ate-max-dt time association tolerance of the ATE, s (default 0.01, as evo)\n"
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
     "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n";
 
 struct Args {
-  std::string bag, out, known_map, features = "kaze";
+  std::string bag, out, known_map, features = "kaze", ns, input = "auto", ate_align = "auto";
+  double ate_max_dt = 0.01;
   std::vector<std::string> configs;
   std::vector<std::pair<std::string, std::string>> sets;
   bool gyro = false, quiet = false, induration = false;
@@ -79,10 +97,12 @@ struct Args {
 };
 
 double secs(const ros::Time& t) { return t.toSec(); }
+std::int64_t nsecs(const ros::Time& t) { return static_cast<std::int64_t>(t.toNSec()); }
 
 slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   slam::StampedPose p;
   p.t = secs(m.header.stamp);
+  p.stamp_ns = nsecs(m.header.stamp);
   p.p = Eigen::Vector3d(m.pose.position.x, m.pose.position.y, m.pose.position.z);
   p.q = Eigen::Quaterniond(m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z);
   return p;
@@ -111,10 +131,38 @@ int run(const Args& a) {
   } catch (const std::exception& e) {
     throw std::invalid_argument("cannot open bag '" + a.bag + "': " + e.what());
   }
-  const std::vector<std::string> topics = {"stereo/landmarks", "stereo/left/image_raw", "stereo/right/image_raw",
-                                           "stereo/left/camera_info", "stereo/right/camera_info", "imu/data",
-                                           "ground_truth/pose"};
-  rosbag::View view(bag, rosbag::TopicQuery(topics));
+  const ros_io::BagTopics topics(bag, a.bag,
+                                 {"stereo/landmarks", "stereo/left/image_raw", "stereo/right/image_raw",
+                                  "stereo/left/camera_info", "stereo/right/camera_info", "imu/data",
+                                  "ground_truth/pose"},
+                                 a.ns);
+  const bool have_images = topics.has("stereo/left/image_raw") && topics.has("stereo/right/image_raw");
+  const bool have_landmarks = topics.has("stereo/landmarks");
+  bool use_images = have_images;
+  if (a.input == "landmarks") use_images = false;
+  if (a.input == "images" && !have_images)
+    throw std::invalid_argument("--input images: '" + a.bag + "' has no stereo/{left,right}/image_raw (" +
+                                topics.summary() + ")");
+  if (a.input == "landmarks" && !have_landmarks)
+    throw std::invalid_argument("--input landmarks: '" + a.bag + "' has no stereo/landmarks (" + topics.summary() + ")");
+  if (!use_images && !have_landmarks)
+    throw std::invalid_argument("'" + a.bag + "' has neither stereo/landmarks nor both stereo/{left,right}/image_raw (" +
+                                topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
+  if (!a.quiet) {
+    std::fprintf(stderr, "process_bag: %s; input: %s%s\n", topics.summary().c_str(),
+                 use_images ? "stereo images through the front end" : "stereo/landmarks",
+                 use_images && have_landmarks ? " (the recorded stereo/landmarks are not used: --input landmarks)" : "");
+  }
+  std::vector<std::string> read = topics.stored();
+  read.erase(std::remove_if(read.begin(), read.end(),
+                            [&](const std::string& t) {
+                              const std::string r = topics.relative(t);
+                              return use_images ? r == "stereo/landmarks" : r.rfind("stereo/", 0) == 0 && r != "stereo/landmarks";
+                            }),
+             read.end());
+  if (opt.use_gyro && !topics.has("imu/data"))
+    std::fprintf(stderr, "process_bag: warning: use_gyro is set but the bag has no imu/data\n");
+  rosbag::View view(bag, rosbag::TopicQuery(read));
 
   std::vector<slam::StampedPose> trajectory, truth;
   std::vector<slam::StateRow> rows;
@@ -125,14 +173,14 @@ int run(const Args& a) {
   const stereo::TriangulateOptions to;
   int frames = 0, bad_frames = 0;
   // frames to expect, for the progress line: landmark messages, or else left images
-  int expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/landmarks")).size());
-  if (expected == 0) expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/left/image_raw")).size());
+  int expected = static_cast<int>(use_images ? topics.count("stereo/left/image_raw") : topics.count("stereo/landmarks"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   tools::Progress progress(expected, a.quiet);
   const auto t_start = std::chrono::steady_clock::now();
   double frame_seconds = 0.0;
 
-  auto frame = [&](double t, const std::vector<slam::Measurement>& m) {
+  auto frame = [&](const ros::Time& stamp, const std::vector<slam::Measurement>& m) {
+    const double t = secs(stamp);
     const auto t0 = std::chrono::steady_clock::now();
     slam::FrameStats s;
     try {
@@ -144,7 +192,7 @@ int run(const Args& a) {
     }
     frame_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const auto& x = slam.filter().state();
-    trajectory.push_back({t, x.p, x.q});
+    trajectory.push_back({t, nsecs(stamp), x.p, x.q});
     rows.push_back(slam::stateRow(slam, s));
     ++frames;
     char detail[160];
@@ -155,7 +203,7 @@ int run(const Args& a) {
 
   for (const rosbag::MessageInstance& mi : view) {
     if (a.frames >= 0 && frames >= a.frames) break;
-    const std::string& topic = mi.getTopic();
+    const std::string topic = topics.relative(mi.getTopic());
     if (topic == "ground_truth/pose") {
       truth.push_back(fromPoseMsg(*mi.instantiate<geometry_msgs::PoseStamped>()));
     } else if (topic == "imu/data") {
@@ -167,9 +215,9 @@ int run(const Args& a) {
                    Eigen::Vector3d(imu->angular_velocity.x, imu->angular_velocity.y, imu->angular_velocity.z), C);
     } else if (topic == "stereo/landmarks") {
       const auto l = mi.instantiate<skin3d::LandmarkArray>();
-      frame(secs(l->header.stamp), ros_conv::fromMsg(*l));
+      frame(l->header.stamp, ros_conv::fromMsg(*l));
     } else {
-      pairs_in.add(mi);
+      pairs_in.add(topic, mi);
     }
     // Process the complete pairs in stamp order once both camera_infos are known.
     sensor_msgs::Image::ConstPtr left, right;
@@ -184,7 +232,7 @@ int run(const Args& a) {
         const auto lms = stereo::triangulateMatches(pairs_in.leftInfo(), pairs_in.rightInfo(), matcher->process(L, R), to);
         std::vector<slam::Measurement> m;
         for (const auto& l : lms) m.push_back({l.position, l.covariance, l.descriptor, l.strength});
-        frame(secs(left->header.stamp), m);
+        frame(left->header.stamp, m);
       } catch (const std::exception& e) {
         ++bad_frames;
         std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(left->header.stamp), e.what());
@@ -192,7 +240,10 @@ int run(const Args& a) {
     }
   }
   progress.done();
-  if (frames == 0) throw std::invalid_argument("no frames in '" + a.bag + "' (no stereo/landmarks or image pairs)");
+  if (frames == 0)
+    throw std::invalid_argument("no frame of '" + a.bag + "' could be processed (" + topics.summary() + "; " +
+                                std::to_string(bad_frames) + " dropped" +
+                                (use_images && !pairs_in.calibrated() ? "; no camera_info for both cameras" : "") + ")");
 
   // ---- results
   slam::RunRecord rec;
@@ -201,11 +252,14 @@ int run(const Args& a) {
   rec.map = slam.map();
   rec.ground_truth = truth;
   rec.fit_sphere = a.known_map.empty();
+  rec.ate_alignment = slam::parseAteAlignment(a.ate_align);
+  rec.ate_max_dt = a.ate_max_dt;
   rec.info = {{"bag", a.bag},
               {"frames_dropped", std::to_string(bad_frames)},
               {"gyro", opt.use_gyro ? "true" : "false"},
               {"known_map", a.known_map.empty() ? "false" : "true"},
               {"front_end", matcher ? a.features : "none (landmark bag)"},
+              {"topics", topics.summary()},
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);
@@ -234,6 +288,10 @@ int main(int argc, char** argv) {
     else if (k == "--config") a.configs.push_back(value());
     else if (k == "--known-map") a.known_map = value();
     else if (k == "--features") a.features = value();
+    else if (k == "--ns") a.ns = value();
+    else if (k == "--input") a.input = value();
+    else if (k == "--ate-align") a.ate_align = value();
+    else if (k == "--ate-max-dt") a.ate_max_dt = std::atof(value().c_str());
     else if (k == "--frames") a.frames = std::atoi(value().c_str());
     else if (k == "--gyro") a.gyro = true;
     else if (k == "--quiet") a.quiet = true;
@@ -260,6 +318,20 @@ int main(int argc, char** argv) {
     std::cerr << "process_bag: --bag and --out are required\n" << kUsage;
     return 2;
   }
+  if (a.input != "auto" && a.input != "images" && a.input != "landmarks") {
+    std::cerr << "process_bag: --input must be auto, images or landmarks (got '" << a.input << "')\n";
+    return 2;
+  }
+  try {
+    slam::parseAteAlignment(a.ate_align);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "process_bag: --ate-align: " << e.what() << "\n";
+    return 2;
+  }
+  if (!(a.ate_max_dt > 0.0)) {
+    std::cerr << "process_bag: --ate-max-dt must be a positive number of seconds\n";
+    return 2;
+  }
   try {
     if (a.induration) {
       tools::IndurationRun r;
@@ -269,6 +341,7 @@ int main(int argc, char** argv) {
       r.sets = a.sets;
       r.frames = a.frames;
       r.quiet = a.quiet;
+      r.ns = a.ns;
       r.command_line = a.command_line;
       return tools::runInduration(r);
     }

@@ -26,6 +26,7 @@
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/induration/induration_io.h"
 #include "skin3d/stereo/dense_stereo.h"
+#include "skin3d/ros/bag_topics.h"
 #include "skin3d/stereo/rectification.h"
 #include "stereo_pairs.h"
 
@@ -44,10 +45,18 @@ int runInduration(const IndurationRun& a) {
   } catch (const std::exception& e) {
     throw std::invalid_argument("cannot open bag '" + a.bag + "': " + e.what());
   }
-  const std::vector<std::string> topics = {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                                           "stereo/right/camera_info"};
-  rosbag::View view(bag, rosbag::TopicQuery(topics));
-  int expected = static_cast<int>(rosbag::View(bag, rosbag::TopicQuery("stereo/left/image_raw")).size());
+  const ros_io::BagTopics topics(bag, a.bag,
+                                 {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                                  "stereo/right/camera_info"},
+                                 a.ns);
+  for (const char* t : {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                        "stereo/right/camera_info"})
+    if (!topics.has(t))
+      throw std::invalid_argument("'" + a.bag + "' has no " + t + " (" + topics.summary() + "). Its topics:\n" +
+                                  ros_io::describeTopics(topics.all()));
+  if (!a.quiet) std::fprintf(stderr, "process_bag: %s\n", topics.summary().c_str());
+  rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
+  int expected = static_cast<int>(topics.count("stereo/left/image_raw"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   StereoPairs pairs_in;
   std::vector<induration::FrameRecord> records;
@@ -91,7 +100,7 @@ int runInduration(const IndurationRun& a) {
 
   int pairs = 0;
   for (const rosbag::MessageInstance& mi : view) {
-    pairs_in.add(mi);
+    pairs_in.add(topics.relative(mi.getTopic()), mi);
     sensor_msgs::Image::ConstPtr left, right;
     while (!(a.frames >= 0 && pairs >= a.frames) && pairs_in.next(&left, &right)) {
       ++pairs;

@@ -20,9 +20,9 @@ namespace tools {
 
 class StereoPairs {
  public:
-  /** @brief Takes a stereo/{left,right}/{image_raw,camera_info} message; false for any other topic. */
-  bool add(const rosbag::MessageInstance& mi) {
-    const std::string& topic = mi.getTopic();
+  /** @brief Takes a stereo/{left,right}/{image_raw,camera_info} message; false for any other topic.
+   *  @param topic the message's relative topic name (ros_io::BagTopics::relative of its stored name) */
+  bool add(const std::string& topic, const rosbag::MessageInstance& mi) {
     if (topic == "stereo/left/camera_info" || topic == "stereo/right/camera_info") {
       const bool left = topic == "stereo/left/camera_info";
       if (!(left ? rect_l_ : rect_r_)) {

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -24,7 +25,10 @@ namespace slam {
 
 /** @brief One pose of a trajectory: time (s), world <- left optical frame. */
 struct StampedPose {
-  double t = 0.0;
+  double t = 0.0;  //!< s, for computing (a double holds an epoch stamp to ~0.2 us only)
+  /** The exact stamp (ns since the epoch) when it came from a message header or a file; < 0: unknown (files
+   *  then write t). trajectory.tum keeps every digit of it, so that tools that associate by time pair all poses. */
+  std::int64_t stamp_ns = -1;
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
 };
@@ -48,18 +52,55 @@ struct StateRow {
 /** @brief Snapshot of the filter after a frame. */
 StateRow stateRow(const SlamSystem& slam, const FrameStats& stats);
 
+/** @brief How a reference trajectory is brought into the estimate's world before the trajectory error. */
+enum class AteAlignment {
+  Auto,       //!< None when the reference's pose at the first paired frame is the estimate's (within 10 mm and
+              //!< 10 mrad: the same world, e.g. a dataset whose world is the first camera frame), else SE3
+  None,       //!< as given (the same world)
+  FirstPose,  //!< the rigid motion that puts the reference's first paired pose onto the estimate's
+  SE3         //!< the rigid motion that best fits all paired positions (Umeyama, no scale; as evo_ape --align)
+};
+/** @brief "auto", "none", "first_pose", "se3". @throws std::invalid_argument naming the accepted words. */
+AteAlignment parseAteAlignment(const std::string& name);
+std::string ateAlignmentName(AteAlignment a);
+
+/** @brief Pairs of (estimate index, reference index) by time: for each estimate pose the nearest reference
+ *  stamp within max_dt s (as the TUM benchmark's associate.py and evo do, without interpolation). */
+std::vector<std::pair<int, int>> associateByTime(const std::vector<StampedPose>& estimate,
+                                                 const std::vector<StampedPose>& reference, double max_dt);
+
+/** @brief The rigid motion T (estimate world <- reference world) that minimises sum |p_est - T p_ref|^2 over the
+ *  pairs (Umeyama 1991 without scale). Needs >= 3 pairs; @throws std::invalid_argument otherwise. */
+Eigen::Isometry3d alignSE3(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& reference,
+                           const std::vector<std::pair<int, int>>& pairs);
+
 /** @brief Absolute trajectory error (positions, m) of `estimate` against `reference`, poses paired by time
- *  (nearest reference stamp within `max_dt` s); no alignment (both are expressed in the same world: SLAM's
- *  world is the first camera frame, as the datasets' is). */
+ *  (associateByTime), after the stated alignment of the reference. */
 struct TrajectoryError {
   int pairs = 0;
   double rmse = 0.0, mean = 0.0, max = 0.0, final = 0.0;  //!< m
   double rotation_rmse = 0.0;                             //!< rad
+  AteAlignment alignment = AteAlignment::None;            //!< what was applied (Auto resolved)
+  std::string alignment_note;                             //!< why (Auto) or a fallback (too few pairs)
+  Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();  //!< estimate world <- reference world
+  double max_dt = 0.0;                                    //!< s, the association tolerance used
+  /** RMS spread of the paired estimate positions along their principal axes, largest first (m): when the two
+   *  smaller ones are tiny (a short, straight piece), an SE(3) fit of the positions cannot fix the rotation about
+   *  the long axis and the rotation error after it says little (alignment_note says so). */
+  Eigen::Vector3d spread = Eigen::Vector3d::Zero();
 };
 TrajectoryError trajectoryError(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& reference,
-                                double max_dt = 1e-3);
+                                AteAlignment alignment = AteAlignment::None, double max_dt = 0.01);
 
-/** @throws std::runtime_error naming the file when it cannot be written. */
+/** @brief A stamp as TUM files and evo write it: seconds with nine decimals ("1700000000.100000000"), from
+ *  stamp_ns when known, else from t. */
+std::string formatStamp(const StampedPose& p);
+/** @brief "1700000000.1" -> 1700000000100000000 ns (digits past the ninth decimal are dropped); -1 if not a
+ *  non-negative decimal number. */
+std::int64_t parseStampNs(const std::string& text);
+
+/** @brief trajectory.tum / ground_truth.tum: `t x y z qx qy qz qw`, stamps with nanosecond digits.
+ *  @throws std::runtime_error naming the file when it cannot be written. */
 void writeTum(const std::string& path, const std::vector<StampedPose>& trajectory);
 void writePly(const std::string& path, const std::vector<MapPoint>& map);
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows);
@@ -74,8 +115,13 @@ struct RunRecord {
   std::vector<StateRow> rows;                 //!< one row per processed frame
   std::vector<MapPoint> map;                  //!< final map (world)
   std::vector<StampedPose> ground_truth;      //!< optional (datasets): ATE and ground_truth.tum
-  /** How ground_truth relates to the SLAM's world (summary.yaml, ate/alignment). */
-  std::string ground_truth_alignment = "none (both worlds are the first camera frame)";
+  /** How ground_truth was already moved before it was recorded here (summary.yaml, ate/ground_truth); empty:
+   *  as the input gave it. */
+  std::string ground_truth_alignment;
+  /** summary.yaml's `ate`: this alignment (Auto: none when the worlds coincide, else SE(3)); `ate_se3` is always
+   *  written too (the figure evo_ape --align reports). */
+  AteAlignment ate_alignment = AteAlignment::Auto;
+  double ate_max_dt = 0.01;  //!< s, the time association tolerance of the ATE
   bool fit_sphere = true;                     //!< robust sphere fit of the map -> sphere_fit.yaml
   std::vector<std::pair<std::string, std::string>> info;  //!< extra summary lines (key, value as text)
 };
@@ -93,7 +139,8 @@ std::string writeResults(const std::string& dir, const RunRecord& run);
  *  @throws std::invalid_argument naming the file and line. */
 std::pair<std::vector<Eigen::Vector3d>, std::vector<std::vector<float>>> readLandmarkMap(const std::string& path);
 
-/** @brief Reads a TUM trajectory (t x y z qx qy qz qw per line, '#' comments). @throws std::runtime_error. */
+/** @brief Reads a TUM trajectory (t x y z qx qy qz qw per line, '#' comments); stamps keep their nanoseconds
+ *  (stamp_ns). @throws std::runtime_error. */
 std::vector<StampedPose> readTum(const std::string& path);
 
 }  // namespace slam

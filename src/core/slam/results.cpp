@@ -2,6 +2,7 @@
 // Results directory writers and the trajectory error (see results.h).
 #include "skin3d/slam/results.h"
 
+#include <Eigen/Eigenvalues>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -22,6 +23,12 @@ std::ofstream open(const std::string& path) {
   if (!f) throw std::runtime_error("cannot write '" + path + "'");
   f.precision(10);
   return f;
+}
+/** A time for the CSV files: fixed, microseconds (what a double holds of an epoch stamp), never 10 digits. */
+std::string stampText(double t) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.6f", t);
+  return buf;
 }
 void close(std::ofstream& f, const std::string& path) {
   f.close();
@@ -49,21 +56,109 @@ StateRow stateRow(const SlamSystem& slam, const FrameStats& stats) {
   return r;
 }
 
+AteAlignment parseAteAlignment(const std::string& name) {
+  if (name == "auto") return AteAlignment::Auto;
+  if (name == "none") return AteAlignment::None;
+  if (name == "first_pose") return AteAlignment::FirstPose;
+  if (name == "se3") return AteAlignment::SE3;
+  throw std::invalid_argument("unknown ATE alignment '" + name + "' (auto, none, first_pose or se3)");
+}
+
+std::string ateAlignmentName(AteAlignment a) {
+  switch (a) {
+    case AteAlignment::Auto: return "auto";
+    case AteAlignment::None: return "none";
+    case AteAlignment::FirstPose: return "first_pose";
+    case AteAlignment::SE3: return "se3";
+  }
+  return "?";
+}
+
+std::vector<std::pair<int, int>> associateByTime(const std::vector<StampedPose>& estimate,
+                                                 const std::vector<StampedPose>& reference, double max_dt) {
+  std::vector<int> order(reference.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return reference[a].t < reference[b].t; });
+  std::vector<std::pair<int, int>> pairs;
+  for (std::size_t e = 0; e < estimate.size(); ++e) {
+    const double t = estimate[e].t;
+    auto it = std::lower_bound(order.begin(), order.end(), t, [&](int r, double v) { return reference[r].t < v; });
+    int best = -1;
+    if (it != order.end()) best = *it;
+    if (it != order.begin() && (best < 0 || std::abs(reference[*std::prev(it)].t - t) < std::abs(reference[best].t - t)))
+      best = *std::prev(it);
+    if (best < 0 || std::abs(reference[best].t - t) > max_dt) continue;
+    pairs.emplace_back(static_cast<int>(e), best);
+  }
+  return pairs;
+}
+
+Eigen::Isometry3d alignSE3(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& reference,
+                           const std::vector<std::pair<int, int>>& pairs) {
+  if (pairs.size() < 3)
+    throw std::invalid_argument("an SE(3) alignment needs at least 3 paired poses (have " +
+                                std::to_string(pairs.size()) + ")");
+  Eigen::Matrix3Xd src(3, pairs.size()), dst(3, pairs.size());
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    src.col(i) = reference[pairs[i].second].p;
+    dst.col(i) = estimate[pairs[i].first].p;
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.matrix() = Eigen::umeyama(src, dst, false);
+  return T;
+}
+
 TrajectoryError trajectoryError(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& reference,
-                                double max_dt) {
+                                AteAlignment alignment, double max_dt) {
   TrajectoryError e;
-  if (reference.empty()) return e;
-  std::vector<StampedPose> ref = reference;
-  std::sort(ref.begin(), ref.end(), [](const StampedPose& a, const StampedPose& b) { return a.t < b.t; });
+  e.max_dt = max_dt;
+  e.alignment = alignment;
+  const auto pairs = associateByTime(estimate, reference, max_dt);
+  if (pairs.empty()) {
+    if (alignment == AteAlignment::Auto) e.alignment = AteAlignment::None;
+    return e;
+  }
+  const StampedPose& e0 = estimate[pairs.front().first];
+  const StampedPose& r0 = reference[pairs.front().second];
+  Eigen::Isometry3d first = Eigen::Isometry3d::Identity();  // estimate world <- reference world at the first pair
+  first.linear() = (e0.q * r0.q.conjugate()).normalized().toRotationMatrix();
+  first.translation() = e0.p - first.linear() * r0.p;
+  if (alignment == AteAlignment::Auto) {
+    const bool same = (e0.p - r0.p).norm() <= 0.010 && e0.q.angularDistance(r0.q) <= 0.010;
+    e.alignment = same ? AteAlignment::None : AteAlignment::SE3;
+    char note[200];
+    std::snprintf(note, sizeof note,
+                  "auto: the reference's first paired pose is %.1f mm / %.1f mrad from the estimate's: %s",
+                  1e3 * (e0.p - r0.p).norm(), 1e3 * e0.q.angularDistance(r0.q),
+                  same ? "the same world, not aligned" : "another world, SE(3)-aligned");
+    e.alignment_note = note;
+  }
+  if (e.alignment == AteAlignment::SE3 && pairs.size() < 3) {
+    e.alignment = AteAlignment::FirstPose;
+    e.alignment_note += std::string(e.alignment_note.empty() ? "" : "; ") + "fewer than 3 pairs: first-pose alignment";
+  }
+  {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& pr : pairs) mean += estimate[pr.first].p / static_cast<double>(pairs.size());
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (const auto& pr : pairs)
+      C += (estimate[pr.first].p - mean) * (estimate[pr.first].p - mean).transpose() / static_cast<double>(pairs.size());
+    const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    e.spread = Eigen::Vector3d(ev(2), ev(1), ev(0));
+  }
+  if (e.alignment == AteAlignment::SE3 && e.spread(1) < 0.05 * e.spread(0))
+    e.alignment_note += std::string(e.alignment_note.empty() ? "" : "; ") +
+                        "the positions lie nearly on a line: the fit leaves the rotation about it loose, so the "
+                        "rotation error after alignment says little";
+  if (e.alignment == AteAlignment::FirstPose) e.transform = first;
+  if (e.alignment == AteAlignment::SE3) e.transform = alignSE3(estimate, reference, pairs);
+  const Eigen::Quaterniond qT(e.transform.linear());
   double ss = 0.0, sr = 0.0, sum = 0.0;
-  for (const auto& p : estimate) {
-    auto it = std::lower_bound(ref.begin(), ref.end(), p.t, [](const StampedPose& a, double t) { return a.t < t; });
-    const StampedPose* best = nullptr;
-    if (it != ref.end()) best = &*it;
-    if (it != ref.begin() && (!best || std::abs(std::prev(it)->t - p.t) < std::abs(best->t - p.t))) best = &*std::prev(it);
-    if (!best || std::abs(best->t - p.t) > max_dt) continue;
-    const double d = (p.p - best->p).norm();
-    const double a = p.q.angularDistance(best->q);
+  for (const auto& pr : pairs) {
+    const StampedPose& p = estimate[pr.first];
+    const StampedPose& r = reference[pr.second];
+    const double d = (p.p - e.transform * r.p).norm();
+    const double a = p.q.angularDistance(qT * r.q);
     ss += d * d;
     sr += a * a;
     sum += d;
@@ -71,20 +166,41 @@ TrajectoryError trajectoryError(const std::vector<StampedPose>& estimate, const 
     e.final = d;
     ++e.pairs;
   }
-  if (e.pairs > 0) {
-    e.rmse = std::sqrt(ss / e.pairs);
-    e.rotation_rmse = std::sqrt(sr / e.pairs);
-    e.mean = sum / e.pairs;
-  }
+  e.rmse = std::sqrt(ss / e.pairs);
+  e.rotation_rmse = std::sqrt(sr / e.pairs);
+  e.mean = sum / e.pairs;
   return e;
+}
+
+std::string formatStamp(const StampedPose& p) {
+  char buf[48];
+  if (p.stamp_ns >= 0) {
+    std::snprintf(buf, sizeof buf, "%lld.%09lld", static_cast<long long>(p.stamp_ns / 1000000000),
+                  static_cast<long long>(p.stamp_ns % 1000000000));
+  } else {
+    std::snprintf(buf, sizeof buf, "%.9f", p.t);
+  }
+  return buf;
+}
+
+std::int64_t parseStampNs(const std::string& text) {
+  const auto dot = text.find('.');
+  const std::string whole = text.substr(0, dot), frac = dot == std::string::npos ? "" : text.substr(dot + 1);
+  if (whole.empty() || whole.size() > 10) return -1;
+  for (char c : whole + frac)
+    if (c < '0' || c > '9') return -1;
+  std::string ns = frac.substr(0, std::min<std::size_t>(9, frac.size()));
+  ns.append(9 - ns.size(), '0');
+  return std::stoll(whole) * 1000000000LL + std::stoll(ns);
 }
 
 void writeTum(const std::string& path, const std::vector<StampedPose>& trajectory) {
   auto f = open(path);
   f << "# skin3d trajectory: t x y z qx qy qz qw (world <- left optical frame; s, m)\n";
+  f.precision(10);
   for (const auto& p : trajectory)
-    f << p.t << ' ' << p.p.x() << ' ' << p.p.y() << ' ' << p.p.z() << ' ' << p.q.x() << ' ' << p.q.y() << ' '
-      << p.q.z() << ' ' << p.q.w() << '\n';
+    f << formatStamp(p) << ' ' << p.p.x() << ' ' << p.p.y() << ' ' << p.p.z() << ' ' << p.q.x() << ' ' << p.q.y()
+      << ' ' << p.q.z() << ' ' << p.q.w() << '\n';
   close(f, path);
 }
 
@@ -99,9 +215,16 @@ std::vector<StampedPose> readTum(const std::string& path) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream is(line);
     StampedPose p;
+    std::string stamp;
     double qx, qy, qz, qw;
-    if (!(is >> p.t >> p.p.x() >> p.p.y() >> p.p.z() >> qx >> qy >> qz >> qw))
+    if (!(is >> stamp >> p.p.x() >> p.p.y() >> p.p.z() >> qx >> qy >> qz >> qw))
       throw std::runtime_error("'" + path + "' line " + std::to_string(n) + ": expected t x y z qx qy qz qw");
+    try {
+      p.t = std::stod(stamp);
+    } catch (const std::exception&) {
+      throw std::runtime_error("'" + path + "' line " + std::to_string(n) + ": the stamp '" + stamp + "' is not a number");
+    }
+    p.stamp_ns = parseStampNs(stamp);
     p.q = Eigen::Quaterniond(qw, qx, qy, qz).normalized();
     out.push_back(p);
   }
@@ -124,7 +247,7 @@ void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows) {
   f << "t,vx,vy,vz,wx,wy,wz,trace_rig,trace_landmarks,trace_all,position_std_m,corr_vx_wy,pool_size,pool_in_use,"
        "ever_seen,measurements,rejected,associated,used,initialised,forks_deleted,pruned,gyro_used,nis,nis_dof\n";
   for (const auto& r : rows)
-    f << r.t << ',' << r.v.x() << ',' << r.v.y() << ',' << r.v.z() << ',' << r.w.x() << ',' << r.w.y() << ','
+    f << stampText(r.t) << ',' << r.v.x() << ',' << r.v.y() << ',' << r.v.z() << ',' << r.w.x() << ',' << r.w.y() << ','
       << r.w.z() << ',' << r.trace_rig << ',' << r.trace_landmarks << ',' << r.trace_all << ','
       << r.pose_position_std << ',' << r.corr_vx_wy << ',' << r.pool_size << ',' << r.pool_in_use << ','
       << r.ever_seen << ',' << r.stats.measurements << ',' << r.stats.rejected_invalid << ',' << r.stats.associated
@@ -148,7 +271,7 @@ void writeRigCovarianceCsv(const std::string& path, const std::vector<StateRow>&
   f.precision(7);
   for (const auto& r : rows) {
     if (r.rig_covariance.rows() != n || r.rig_covariance.cols() != n) continue;  // e.g. rows without a filter
-    f << std::setprecision(10) << r.t << std::setprecision(7);
+    f << stampText(r.t);
     for (int i = 0; i < n; ++i)
       for (int j = 0; j < n; ++j) f << ',' << r.rig_covariance(i, j);
     f << '\n';
@@ -198,12 +321,31 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
     y << YAML::Key << "corr_vx_wy_final" << YAML::Value << r.corr_vx_wy;
   }
   if (!run.ground_truth.empty()) {
-    const TrajectoryError e = trajectoryError(run.trajectory, run.ground_truth);
-    y << YAML::Key << "ate" << YAML::Value << YAML::BeginMap << YAML::Key << "pairs" << YAML::Value << e.pairs
-      << YAML::Key << "rmse_mm" << YAML::Value << 1e3 * e.rmse << YAML::Key << "mean_mm" << YAML::Value << 1e3 * e.mean
-      << YAML::Key << "max_mm" << YAML::Value << 1e3 * e.max << YAML::Key << "final_mm" << YAML::Value << 1e3 * e.final
-      << YAML::Key << "rotation_rmse_mrad" << YAML::Value << 1e3 * e.rotation_rmse << YAML::Key << "alignment"
-      << YAML::Value << run.ground_truth_alignment << YAML::EndMap;
+    auto ate = [&](const char* key, AteAlignment a, const char* what) {
+      const TrajectoryError e = trajectoryError(run.trajectory, run.ground_truth, a, run.ate_max_dt);
+      y << YAML::Key << key << YAML::Value << YAML::BeginMap << YAML::Key << "pairs" << YAML::Value << e.pairs
+        << YAML::Key << "rmse_mm" << YAML::Value << 1e3 * e.rmse << YAML::Key << "mean_mm" << YAML::Value
+        << 1e3 * e.mean << YAML::Key << "max_mm" << YAML::Value << 1e3 * e.max << YAML::Key << "final_mm"
+        << YAML::Value << 1e3 * e.final << YAML::Key << "rotation_rmse_mrad" << YAML::Value << 1e3 * e.rotation_rmse
+        << YAML::Key << "alignment" << YAML::Value << ateAlignmentName(e.alignment);
+      std::string note = what;
+      if (!e.alignment_note.empty()) note += std::string(note.empty() ? "" : "; ") + e.alignment_note;
+      if (!note.empty()) y << YAML::Key << "alignment_note" << YAML::Value << note;
+      if (e.alignment != AteAlignment::None) {
+        const Eigen::Vector3d t = e.transform.translation();
+        const Eigen::Quaterniond q(e.transform.linear());
+        y << YAML::Key << "alignment_transform" << YAML::Value << YAML::Flow << YAML::BeginSeq << t.x() << t.y()
+          << t.z() << q.x() << q.y() << q.z() << q.w() << YAML::EndSeq;
+      }
+      y << YAML::Key << "max_dt_s" << YAML::Value << e.max_dt;
+      y << YAML::Key << "position_spread_mm" << YAML::Value << YAML::Flow << YAML::BeginSeq << 1e3 * e.spread(0)
+        << 1e3 * e.spread(1) << 1e3 * e.spread(2) << YAML::EndSeq;
+      if (!run.ground_truth_alignment.empty())
+        y << YAML::Key << "ground_truth" << YAML::Value << run.ground_truth_alignment;
+      y << YAML::EndMap;
+    };
+    ate("ate", run.ate_alignment, run.ate_alignment == AteAlignment::Auto ? "" : "as asked");
+    ate("ate_se3", AteAlignment::SE3, "always SE(3)-aligned (Umeyama, no scale), as evo_ape --align");
   }
   if (run.fit_sphere && run.map.size() >= 4) {
     std::vector<Eigen::Vector3d> pts;

@@ -48,7 +48,6 @@ IMPLICIT_COMMANDS = [("rostest", "CMake's add_rostest runs it"), ("roscore", "ro
 SHELL_SKIP = {  # keywords and builtins (bash's own), never a package's executable
     "if", "then", "else", "elif", "fi", "do", "done", "while", "until", "for", "in", "case", "esac", "function",
     "select", "!", "{", "}", "[[", "]]", "[", "]", "time", "coproc"}
-WRAPPERS = {"exec", "sudo", "$sudo", "nohup", "command", "env", "xargs", "time"}
 
 
 def run(cmd, **kw):
@@ -180,6 +179,7 @@ def shell_words(text):
             quoted = True
             while i < n and text[i] != '"':
                 if text[i] == "\\":
+                    word.append(text[i + 1:i + 2])  # an escaped character stays (\$( is text, not a substitution)
                     i += 2
                     continue
                 if text.startswith("$(", i) and not text.startswith("$((", i):
@@ -232,9 +232,55 @@ def shell_words(text):
 
 
 
+def strip_heredocs(text):
+    """Drops the bodies of here-documents (<<EOF ... EOF, <<'EOF', <<-EOF): data, not commands."""
+    out, lines, i = [], text.split("\n"), 0
+    while i < len(lines):
+        line = lines[i]
+        out.append(line)
+        m = re.search(r"<<(-?)\s*([\'\"]?)(\w+)\2", line) if "<<<" not in line else None
+        i += 1
+        if m:
+            dash, delim = m.group(1), m.group(3)
+            while i < len(lines) and (lines[i].lstrip("\t") if dash else lines[i]) != delim:
+                i += 1
+            i += 1  # the terminator
+    return "\n".join(out)
+
+
+def strip_case_patterns(text):
+    """Blanks the patterns of case clauses (`--out)`, `a|b)`): they are not commands."""
+    def body(m):
+        b = re.sub(r"(^|;;&?|;&)(\s*)\(?[^()$`;\n]*?\)", lambda mm: mm.group(1) + mm.group(2), m.group(2))
+        return m.group(1) + b + m.group(3)
+    return re.sub(r"(\bcase\b[^\n;]*?\bin\b)(.*?)(\besac\b)", body, text, flags=re.S)
+
+
+ASSIGNMENT = re.compile(r"^[A-Za-z_]\w*(\[[^]]*\])?\+?=")
+# Commands that run another command: the wrapper itself is checked when it is a program, then the wrapped one.
+PREFIXES = {"exec", "time", "sudo", "$sudo", "nohup", "env", "xargs", "timeout", "nice", "stdbuf", "command"}
+
+
+def wrapper_functions(text):
+    """{name: arguments it shifts off} for the functions that run their arguments ("$@" in the body)."""
+    out = {}
+    for m in re.finditer(r"^\s*(?:function\s+)?([\w-]+)\s*\(\)\s*\{(.*?)^\s*\}", text, re.M | re.S):
+        body = m.group(2)
+        if '"$@"' in body:
+            out[m.group(1)] = len(re.findall(r"\bshift\b", body[:body.index('"$@"')]))
+    return out
+
+
 def shell_commands(text, builtins):
+    text = strip_case_patterns(strip_heredocs(text))
     functions = set(re.findall(r"^\s*(?:function\s+)?([\w-]+)\s*\(\)", text, re.M))
+    wrappers = wrapper_functions(text)
     out = []
+
+    def candidate(w):
+        return (w and "$" not in w and not w.startswith("-") and w not in builtins and w not in functions and
+                not w.endswith(")") and re.match(r"^[\w./+-]+$", w) and not w.isdigit() and re.search(r"[A-Za-z]", w))
+
     for seg in shell_words(text):
         words = [w for w, _ in seg]
         if not words or words[0] in ("for", "case", "select", "function") or words[0].endswith("()"):
@@ -242,22 +288,25 @@ def shell_commands(text, builtins):
         k = 0
         while k < len(words):
             w = words[k]
-            if re.match(r"^[A-Za-z_]\w*(\[[^]]*\])?\+?=", w) or w in SHELL_SKIP or w in WRAPPERS:
+            if ASSIGNMENT.match(w) or w in SHELL_SKIP:
+                k += 1
+            elif w in wrappers:
+                k += 1 + wrappers[w]
+            elif w in PREFIXES:
                 if w == "command" and k + 1 < len(words) and words[k + 1].startswith("-"):
                     break  # command -v X: a look-up, not a run
+                if w not in ("exec", "time", "command", "$sudo") and candidate(w):
+                    out.append(w)
                 k += 1
-                while w in ("env", "sudo", "$sudo", "xargs", "nohup") and k < len(words) and words[k].startswith("-"):
+                while k < len(words) and (words[k].startswith("-") or ASSIGNMENT.match(words[k]) or
+                                          re.match(r"^[\d.]+[smhd]?$", words[k])):
                     k += 1
-                continue
-            break
-        if k >= len(words):
-            continue
-        w = words[k]
-        if not w or "$" in w or w.startswith("-") or w in builtins or w in functions or w.endswith(")"):
-            continue
-        if not re.match(r"^[\w./+-]+$", w) or w.isdigit():
-            continue
-        out.append(w)
+            else:
+                if candidate(w):
+                    out.append(w)
+                    if w in ("bash", "sh") and k + 2 < len(words) and words[k + 1] == "-c":
+                        out.extend(shell_commands(words[k + 2], builtins))
+                break
     return out
 
 

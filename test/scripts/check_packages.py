@@ -14,8 +14,8 @@ collects what the project starts:
     with a small quote-aware scanner), every absolute /usr/bin or /bin path named in scripts, tests, launch and
     CMake files, the commands that Python scripts run through subprocess, and the first word of the literal
     commands that C++ tests and tools pass to system() / popen();
-  - every module that the Python scripts import (scripts/*.py, test/scripts/*.py), the standard library and
-    the project's own modules aside;
+  - every module that the Python scripts and test nodes import (scripts/*.py, test/**/*.py), the standard
+    library and the project's own modules (and its generated messages) aside;
 finds the file each one is (roslib for nodes, /usr/bin:/bin:/usr/sbin:/sbin for commands, importlib for modules),
 asks dpkg which Debian package owns that file, and requires that package to be in the closure of the list:
 the listed packages, everything they depend on (apt-cache depends --recurse; Depends and Pre-Depends, every
@@ -351,9 +351,9 @@ def command_items(root, builtins):
 
 def python_items(root):
     items = []
-    local = {os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(root, "scripts", "*.py"))}
-    local |= {os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(root, "test", "scripts", "*.py"))}
-    files = sorted(glob.glob(os.path.join(root, "scripts", "*.py")) + glob.glob(os.path.join(root, "test", "scripts", "*.py")))
+    files = sorted(glob.glob(os.path.join(root, "scripts", "*.py")) +
+                   glob.glob(os.path.join(root, "test", "**", "*.py"), recursive=True))
+    local = {os.path.splitext(os.path.basename(p))[0] for p in files} | {"skin3d"}  # skin3d: the generated messages
     for p in files:
         rel = os.path.relpath(p, root)
         with open(p) as f:

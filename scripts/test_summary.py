@@ -27,6 +27,16 @@ def main():
             print(f"FAILED  {path}: unreadable result file ({e})")
             failed += 1
             continue
+        # A suite can fail outside its cases (e.g. a Python unittest whose setUpClass raised: tests="0" errors="1",
+        # no <testcase>): count what the suite reports beyond its failing cases.
+        for suite in tree.iter("testsuite"):
+            listed = sum(1 for c in suite.findall("testcase") if c.findall("failure") + c.findall("error"))
+            reported = int(suite.get("errors", 0) or 0) + int(suite.get("failures", 0) or 0)
+            if reported > listed:
+                failed += reported - listed
+                text = " ".join((suite.findtext("system-err") or suite.findtext("system-out") or "").split())[:300]
+                print(f"FAILED  {suite.get('name', '?')} ({os.path.basename(path)}): {reported - listed} error(s) "
+                      f"outside its test cases {text}")
         for case in tree.iter("testcase"):
             name = f"{case.get('classname', '')}.{case.get('name', '')}"
             problems = case.findall("failure") + case.findall("error")

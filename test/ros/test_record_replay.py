@@ -108,6 +108,9 @@ class RecordReplay(unittest.TestCase):
             s = yaml.safe_load(f)
         frames = int(s["frames"])
         self.assertGreaterEqual(frames, int(0.9 * self.expected), text)
+        # a recording with images and the front end's landmarks is processed from the images (--input auto)
+        images = "image_raw" in rospy.get_param("~frames_topic", "stereo/landmarks")
+        self.assertEqual(s["front_end"] != "none (landmark bag)", images, "front_end: %s" % s["front_end"])
         with open(os.path.join(out, "trajectory.tum")) as f:
             stamps = [line.split()[0] for line in f if line.strip() and not line.startswith("#")]
         self.assertEqual(len(stamps), frames)

@@ -4,7 +4,8 @@
  * perturbation that makes a rendered dataset as imperfect as a real stereo calibration.
  *
  * Kinds: globe-landmarks (thesis' landmark-level globe simulator), globe-images (the same scene
- * rendered), workpiece (the validation workpiece seen by the Part I rig). Defaults reproduce the
+ * rendered), workpiece (the validation workpiece seen by the Part I rig), skin (a limb with plaques seen by
+ * the Part I rig: skin.h). Defaults reproduce the
  * thesis' parameters; a YAML file (config/datasets/globe.yaml, workpiece.yaml document every field)
  * overrides them.
  *
@@ -21,11 +22,12 @@
 #include "skin3d/sim/globe.h"
 #include "skin3d/sim/render.h"
 #include "skin3d/sim/sim_error.h"
+#include "skin3d/sim/skin.h"
 
 namespace skin3d {
 namespace sim {
 
-enum class DatasetKind { GlobeLandmarks, GlobeImages, Workpiece };
+enum class DatasetKind { GlobeLandmarks, GlobeImages, Workpiece, Skin };
 
 /** @throws SimConfigError("kind", ...) listing the known kinds. */
 DatasetKind parseDatasetKind(const std::string& name);
@@ -123,11 +125,35 @@ struct WorkpieceConfig {
   void validate() const;
 };
 
+/** @brief The skin dataset (config/datasets/skin.yaml documents every field). */
+struct SkinConfig {
+  bool random = true;                 //!< draw the limb, its plaques and its pose from the seed (randomSkinGeometry)
+  int plaque_count = 5;               //!< random: plaques drawn
+  double dome_max = 0.0;              //!< random: plaque tops domed up to this (0 = flat tops)
+  SkinGeometry geometry;              //!< used when !random (plaques in surface coordinates)
+  double yaw = 0.0;                   //!< rad, the limb axis turned about the rig axis (0: along the baseline)
+  double tilt = 0.0;                  //!< rad, the limb axis tilted towards / away from the rig
+  double roll = 0.0;                  //!< rad, the limb turned about its own axis
+  double max_yaw = 30.0 * M_PI / 180.0, max_tilt = 8.0 * M_PI / 180.0, max_roll = 15.0 * M_PI / 180.0;  //!< random: +- ranges
+  RigConfig rig;                      //!< default: the Part I rig
+  double working_distance = 0.245;    //!< m, rig midpoint to the skin along the rig axis
+  double resolution_scale = 1.0;
+  int frames = 2;
+  double fps = 2.0;
+  double contrast = 1.0;              //!< skin albedo modulation (1: a few grey levels)
+  bool scale_texture = true;          //!< psoriatic scale on plaque tops
+  RigConfig scaledRig() const;
+  /** @brief The scene's geometry and pose for a seed (random or as configured). */
+  SkinGeometry geometryFor(std::uint64_t seed, double* yaw, double* tilt, double* roll) const;
+  void validate() const;
+};
+
 struct DatasetConfig {
   DatasetKind kind = DatasetKind::GlobeLandmarks;
   std::uint64_t seed = 1;
   GlobeConfig globe;
   WorkpieceConfig workpiece;
+  SkinConfig skin;
   ImageConfig images;
   std::string source;                 //!< where overrides came from (for the truth file)
 };

@@ -74,7 +74,8 @@ DatasetKind parseDatasetKind(const std::string& name) {
   if (name == "globe-landmarks") return DatasetKind::GlobeLandmarks;
   if (name == "globe-images") return DatasetKind::GlobeImages;
   if (name == "workpiece") return DatasetKind::Workpiece;
-  throw SimConfigError("kind", "unknown dataset kind '" + name + "'; known: globe-landmarks, globe-images, workpiece");
+  if (name == "skin") return DatasetKind::Skin;
+  throw SimConfigError("kind", "unknown dataset kind '" + name + "'; known: globe-landmarks, globe-images, workpiece, skin");
 }
 
 std::string datasetKindName(DatasetKind kind) {
@@ -85,6 +86,8 @@ std::string datasetKindName(DatasetKind kind) {
       return "globe-images";
     case DatasetKind::Workpiece:
       return "workpiece";
+    case DatasetKind::Skin:
+      return "skin";
   }
   return "?";
 }
@@ -123,11 +126,70 @@ void WorkpieceConfig::validate() const {
   scaledRig().makeRig();
 }
 
+RigConfig SkinConfig::scaledRig() const {
+  RigConfig r = rig;
+  r.width = std::max(1, static_cast<int>(std::lround(rig.width * resolution_scale)));
+  r.height = std::max(1, static_cast<int>(std::lround(rig.height * resolution_scale)));
+  r.pixel_size = rig.pixel_size * rig.width / r.width;
+  return r;
+}
+
+SkinGeometry SkinConfig::geometryFor(std::uint64_t seed, double* y, double* t, double* r) const {
+  SkinGeometry g = geometry;
+  *y = yaw;
+  *t = tilt;
+  *r = roll;
+  if (random) {
+    try {
+      g = randomSkinGeometry(seed, plaque_count, dome_max);
+    } catch (const std::runtime_error& e) {
+      throw SimConfigError("skin.plaque_count", std::string("field 'skin.plaque_count': ") + e.what());
+    }
+    g.length = geometry.length;
+    std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 0xC0FFEEull);
+    auto u = [&](double m) { return m * (2.0 * static_cast<double>(rng() >> 11) * (1.0 / 9007199254740992.0) - 1.0); };
+    *y = u(max_yaw);
+    *t = u(max_tilt);
+    *r = u(max_roll);
+  }
+  g.contrast = contrast;
+  g.scale_texture = scale_texture;
+  return g;
+}
+
+void SkinConfig::validate() const {
+  if (plaque_count < 0 || plaque_count > 12) bad("skin.plaque_count", plaque_count, "must be in 0..12");
+  if (!(dome_max >= 0 && dome_max <= 1)) bad("skin.dome_max", dome_max, "must be in [0, 1]");
+  for (const auto& [name, v] : {std::pair<const char*, double>{"yaw_deg", yaw}, {"tilt_deg", tilt}, {"roll_deg", roll},
+                                {"max_yaw_deg", max_yaw}, {"max_tilt_deg", max_tilt}, {"max_roll_deg", max_roll}})
+    if (!std::isfinite(v) || std::abs(v) > 90 * kDeg) bad(std::string("skin.") + name, v / kDeg, "must be in [-90, 90]");
+  if (std::abs(tilt) > 30 * kDeg || max_tilt > 30 * kDeg) bad("skin.tilt_deg", tilt / kDeg, "tilts beyond 30 deg are not supported");
+  if (!(working_distance > 0) || !std::isfinite(working_distance))
+    bad("skin.working_distance_mm", working_distance * 1e3, "must be > 0");
+  if (!(resolution_scale > 0) || resolution_scale > 1) bad("skin.resolution_scale", resolution_scale, "must be in (0, 1]");
+  if (frames < 1) bad("skin.frames", frames, "must be >= 1");
+  if (!(fps > 0) || !std::isfinite(fps)) bad("skin.fps", fps, "must be > 0");
+  if (!(contrast >= 0) || contrast > 5) bad("skin.contrast", contrast, "must be in [0, 5]");
+  const double ay = geometry.semi_axis_y, az = geometry.semi_axis_z;
+  if (!(ay >= 0.01 && ay <= 0.2) || !(az >= 0.01 && az <= 0.2))
+    bad("skin.limb.semi_axes_mm", std::min(ay, az) * 1e3, "must be in [10, 200] mm");
+  if (!(geometry.length > 0.02)) bad("skin.limb.length_mm", geometry.length * 1e3, "must be > 20 mm");
+  if (!random) {
+    try {
+      SkinScene probe(geometry, 1);
+    } catch (const std::invalid_argument& e) {
+      throw SimConfigError("skin.plaques", std::string("field 'skin.plaques': ") + e.what());
+    }
+  }
+  scaledRig().makeRig();
+}
+
 DatasetConfig defaultDatasetConfig(DatasetKind kind) {
   DatasetConfig c;
   c.kind = kind;
   c.workpiece.rig = partOneRig();
   c.workpiece.plateaus = defaultPlateaus();
+  c.skin.rig = partOneRig();
   // The right camera's photometry differs from the left's, as two real modules do.
   c.images.right.gain = 0.93;
   c.images.right.offset = 0.015;
@@ -135,6 +197,12 @@ DatasetConfig defaultDatasetConfig(DatasetKind kind) {
   if (kind == DatasetKind::Workpiece) {
     // The Part I lenses are focused at the working distance; a little more blur than the binned SLAM rig.
     c.images.left.blur_sigma = c.images.right.blur_sigma = 0.8;
+  }
+  if (kind == DatasetKind::Skin) {
+    // The same rig and lenses as the workpiece; skin is darker than the white plate, so at the same exposure
+    // fewer electrons: about 3.5 DN of noise against the skin's few grey levels of texture.
+    c.images.left.blur_sigma = c.images.right.blur_sigma = 0.8;
+    c.images.left.full_well = c.images.right.full_well = 3000;
   }
   return c;
 }
@@ -156,7 +224,7 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   }
   c->source = source;
   if (!root || root.IsNull()) return;  // an empty file changes nothing
-  const Section top(root, "", {"seed", "globe", "gyro", "rig", "workpiece", "images"});
+  const Section top(root, "", {"seed", "globe", "gyro", "rig", "workpiece", "skin", "images"});
   if (top.has("seed")) {
     const double s = top.number("seed", false);
     if (s < 0 || std::floor(s) != s) bad("seed", s, "must be a whole number >= 0");
@@ -193,7 +261,7 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
                                           "baseline_mm",     "convergence_deg", "distortion"};
   // `rig` applies to the kind's own rig: the SLAM rig for the globe, the Part I rig for the workpiece.
   const Section rs = top.sub("rig", false, rig_keys);
-  readRig(rs, c->kind == DatasetKind::Workpiece ? &c->workpiece.rig : &g.rig);
+  readRig(rs, c->kind == DatasetKind::Workpiece ? &c->workpiece.rig : c->kind == DatasetKind::Skin ? &c->skin.rig : &g.rig);
 
   WorkpieceConfig& w = c->workpiece;
   const Section ws = top.sub("workpiece", false,
@@ -218,6 +286,51 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   w.frames = ws.integer("frames", false, w.frames);
   w.fps = ws.number("fps", false, w.fps);
   w.texel = ws.number("texel_um", false, w.texel * 1e6) * 1e-6;
+
+  SkinConfig& k = c->skin;
+  const Section ks = top.sub("skin", false,
+                             {"random", "plaque_count", "dome_max", "limb", "plaques", "yaw_deg", "tilt_deg", "roll_deg",
+                              "max_yaw_deg", "max_tilt_deg", "max_roll_deg", "working_distance_mm", "resolution_scale",
+                              "frames", "fps", "contrast", "scale_texture"});
+  k.random = ks.boolean("random", k.random);
+  k.plaque_count = ks.integer("plaque_count", false, k.plaque_count);
+  k.dome_max = ks.number("dome_max", false, k.dome_max);
+  const Section ls = ks.sub("limb", false, {"semi_axes_mm", "length_mm"});
+  const auto ax = ls.list("semi_axes_mm", 2, false);
+  if (!ax.empty()) {
+    k.geometry.semi_axis_y = ax[0] * 1e-3;
+    k.geometry.semi_axis_z = ax[1] * 1e-3;
+  }
+  k.geometry.length = ls.number("length_mm", false, k.geometry.length * 1e3) * 1e-3;
+  if (ks.has("plaques")) {
+    k.geometry.plaques.clear();
+    for (const auto& p : ks.sequence("plaques", {"centre_mm", "radii_mm", "orientation_deg", "height_mm", "ramp_mm",
+                                                 "dome", "irregularity"})) {
+      SkinPlaque q;
+      const auto cc = p.list("centre_mm", 2, true), rr = p.list("radii_mm", 2, true);
+      q.centre = Eigen::Vector2d(cc[0], cc[1]) * 1e-3;
+      q.radii = Eigen::Vector2d(rr[0], rr[1]) * 1e-3;
+      q.orientation = p.number("orientation_deg", false, 0.0) * kDeg;
+      q.height = p.number("height_mm", true) * 1e-3;
+      q.ramp = p.number("ramp_mm", false, q.ramp * 1e3) * 1e-3;
+      q.dome = p.number("dome", false, q.dome);
+      q.irregularity = p.number("irregularity", false, q.irregularity);
+      q.shape_seed = k.geometry.plaques.size() + 1;
+      k.geometry.plaques.push_back(q);
+    }
+  }
+  k.yaw = ks.number("yaw_deg", false, k.yaw / kDeg) * kDeg;
+  k.tilt = ks.number("tilt_deg", false, k.tilt / kDeg) * kDeg;
+  k.roll = ks.number("roll_deg", false, k.roll / kDeg) * kDeg;
+  k.max_yaw = ks.number("max_yaw_deg", false, k.max_yaw / kDeg) * kDeg;
+  k.max_tilt = ks.number("max_tilt_deg", false, k.max_tilt / kDeg) * kDeg;
+  k.max_roll = ks.number("max_roll_deg", false, k.max_roll / kDeg) * kDeg;
+  k.working_distance = ks.number("working_distance_mm", false, k.working_distance * 1e3) * 1e-3;
+  k.resolution_scale = ks.number("resolution_scale", false, k.resolution_scale);
+  k.frames = ks.integer("frames", false, k.frames);
+  k.fps = ks.number("fps", false, k.fps);
+  k.contrast = ks.number("contrast", false, k.contrast);
+  k.scale_texture = ks.boolean("scale_texture", k.scale_texture);
 
   ImageConfig& im = c->images;
   const Section is =
@@ -265,6 +378,8 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
 void validateDatasetConfig(const DatasetConfig& c) {
   if (c.kind == DatasetKind::Workpiece) {
     c.workpiece.validate();
+  } else if (c.kind == DatasetKind::Skin) {
+    c.skin.validate();
   } else {
     c.globe.validate();
   }

@@ -185,7 +185,7 @@ class IndurationRun:
         """True vs measured plateaus (the thesis' Table 4.2): list of dicts, and the unmatched plaques."""
         frames = self.result.get("frames") or []
         rows, used = [], [set() for _ in frames]
-        for p in (self.truth_yaml or {}).get("plateaus") or []:
+        for p in (self.truth_yaml or {}).get("plateaus") or (self.truth_yaml or {}).get("plaques") or []:
             c = np.array(p["centroid_left_m"])
             h, a, k = [], [], []
             for i, f in enumerate(frames):

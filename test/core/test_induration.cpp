@@ -96,6 +96,8 @@ TEST(Induration, PlaquesOnATiltedPlane) {
   s.outliers = true;
   const auto r = measureInduration(s.cloud(), IndurationOptions());
   ASSERT_TRUE(r.reference_ok);
+  for (const auto& c : r.reference.candidates) std::printf("candidate %s: %.2f um\n", c.first.c_str(), c.second * 1e6);
+  EXPECT_EQ(r.reference.model, "plane") << "a plane is a plane";
   EXPECT_GT(r.outliers_removed, 0);
   EXPECT_LT(r.reference.rms, 3 * s.noise);
   EXPECT_GT(std::fabs(r.reference.normal.dot(s.normal)), 0.9999);
@@ -133,10 +135,18 @@ TEST(Induration, CurvedSkinNeedsTheQuadraticReference) {
   EXPECT_NEAR(r.plaques[0].mean_height, 0.3e-3, 0.01e-3);
   // with the plane model the curved skin itself stands out or the height is biased
   IndurationOptions plane;
+  plane.reference_model = "plane";
   const auto rp = measureInduration(s.cloud(), plane);
   bool wrong = rp.plaques.size() != 1;
   if (!wrong) wrong = std::fabs(rp.plaques[0].mean_height - 0.3e-3) > 0.01e-3;
   EXPECT_TRUE(wrong) << "the test scene is not curved enough to tell the models apart";
+  // the default (auto) sees that the skin is curved and measures against the quadric surface
+  const auto ra = measureInduration(s.cloud(), IndurationOptions());
+  ASSERT_TRUE(ra.reference_ok);
+  for (const auto& c : ra.reference.candidates) std::printf("candidate %s: %.2f um\n", c.first.c_str(), c.second * 1e6);
+  EXPECT_EQ(ra.reference.model, "quadric");
+  ASSERT_EQ(ra.plaques.size(), 1u);
+  EXPECT_NEAR(ra.plaques[0].mean_height, 0.3e-3, 0.01e-3);
 }
 
 TEST(Induration, NoHealthySkinLeftIsAWarning) {

@@ -57,6 +57,7 @@ TEST(IndurationConfig, KeysAreUniqueAndCoverTheHeader) {
       // DenseStereoOptions but min/max_disparity and roi
       "coarse_max_width", "sgbm_mode", "block_size", "p1", "p2", "uniqueness_ratio", "lr_max_diff", "speckle_window",
       "speckle_range", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "max_sigma", "min_texture",
+      "min_correlation",
       "vertical",
       // IndurationOptions
       "reference_model", "min_height", "min_area", "max_height", "smoothing_px", "edge_fraction", "exclusion_margin_px",

@@ -101,7 +101,7 @@ TEST(IndurationIo, YamlRoundTripWithRepeatability) {
   ASSERT_TRUE(y["units"].IsMap());
   // Options in human units.
   const YAML::Node o = y["options"];
-  EXPECT_EQ(o["reference_model"].as<std::string>(), "plane");
+  EXPECT_EQ(o["reference_model"].as<std::string>(), "auto");
   EXPECT_NEAR(o["min_height_mm"].as<double>(), 0.05, 1e-9);
   EXPECT_NEAR(o["min_area_mm2"].as<double>(), 4.0, 1e-9);
   const std::vector<double> pasi = numbers(o["pasi_boundaries_mm"]);

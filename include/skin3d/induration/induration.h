@@ -55,7 +55,10 @@ class IndurationError : public std::invalid_argument {
 };
 
 struct IndurationOptions {
-  std::string reference_model = "plane";  //!< "plane" or "quadratic" (curved skin)
+  /** "auto" (default): the simplest of plane and quadric that fits the healthy skin (see ReferenceSurface);
+   *  "plane", "quadric" (implicit quadric surface: a limb, cylinder, cone, ellipsoid, at any pose) or
+   *  "quadratic" (a height field quadratic over the plane: gently curved skin seen face-on). */
+  std::string reference_model = "auto";
   double min_height = 0.05e-3;       //!< m: a point this far above the reference belongs to a plaque
   double min_area = 4e-6;            //!< m^2: smaller regions are not plaques
   double max_height = 5e-3;          //!< m: higher regions are not skin plaques (ignored with a warning)
@@ -76,6 +79,16 @@ struct IndurationOptions {
  *  quadratic model, a height offset c0 + c1 u + c2 v + c3 u^2 + c4 u v + c5 v^2 along n, with (u, v) the
  *  in-plane coordinates of x about `origin` along `e1`, `e2`. */
 struct ReferenceSurface {
+  // Model "quadric": the implicit surface F(x) = 0, F = m(y)^T coefficients, m = (y1^2, y2^2, y3^2, y1 y2, y1 y3,
+  // y2 y3, y1, y2, y3, 1), y = (x - q_centre) / q_scale; the height is the signed distance to it (the foot
+  // point by Newton steps along the gradient), positive on the camera's side (q_sign).
+  Eigen::Matrix<double, 10, 1> coefficients = Eigen::Matrix<double, 10, 1>::Zero();
+  Eigen::Vector3d q_centre = Eigen::Vector3d::Zero();
+  double q_scale = 1.0, q_sign = 1.0;
+  /** Every model tried by "auto" with the robust scale (1.4826 MAD, m) of its healthy-skin residuals. */
+  std::vector<std::pair<std::string, double>> candidates;
+  /** @brief Unit normal of the surface near x (towards the camera) and the tangent plane's d (n.x + d = 0). */
+  Eigen::Vector4d tangentPlane(const Eigen::Vector3d& x) const;
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   double d = 0;
   Eigen::Vector3d origin = Eigen::Vector3d::Zero(), e1 = Eigen::Vector3d::UnitX(), e2 = Eigen::Vector3d::UnitY();
@@ -97,6 +110,8 @@ struct Plaque {
   double mean_height_sigma = 0;  //!< m, standard error of the mean height (from the per-point sigmas)
   int pasi_class = 0;
   int pixels = 0;
+  double measured_fraction = 0;  //!< share of the plaque's pixels that have a height (the rest: matcher gaps)
+  double volume = 0;           //!< m^3, sum of height x footprint over the measured pixels / measured_fraction
   cv::Rect bbox;               //!< in the image
 };
 

@@ -16,7 +16,7 @@
  *     is followed exactly and there is no pixel locking (no 1/16-px quantisation, no parabola bias).
  *     A pixel whose fit moves more than `refine_max_shift` (semi-global level) px from the semi-global
  *     value, or whose window has too little texture (`min_texture`), too large a sigma (`max_sigma`) or a
- *     normalised correlation below 0.5 (the images do not look alike there), becomes unknown.
+ *     normalised correlation below `min_correlation` (the images do not look alike there), becomes unknown.
  *  4. Uncertainty: sigma_d^2 = s^2 / sum(w * Ix^2) over the window, s^2 the window's residual variance
  *     (the Gauss-Newton covariance of the fitted shift), inflated by (1 + phi)/(1 - phi) per direction with
  *     phi = the product of the lag-1 correlations of residual and gradient in the window (an AR(1) model of
@@ -70,6 +70,10 @@ struct DenseStereoOptions {
   double refine_max_shift = 1.0; //!< px at the semi-global level: a fit farther than this from its value = unknown
   double max_sigma = 1.0;        //!< px: pixels with a larger disparity sigma are unknown
   double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
+  /** Windowed normalised correlation of the fit below which = unknown. Two noisy views of the same texture
+   *  correlate at SNR^2 / (1 + SNR^2) only: skin with texture about as strong as the sensor noise reaches ~0.5,
+   *  so the threshold only rejects windows that do not look alike at all; sigma judges the rest. */
+  double min_correlation = 0.2;
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };
 

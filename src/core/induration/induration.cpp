@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <numeric>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "../common/text.h"
@@ -19,8 +20,8 @@ namespace induration {
 using common::num;
 
 void IndurationOptions::validate() const {
-  if (reference_model != "plane" && reference_model != "quadratic")
-    throw IndurationError("reference_model '" + reference_model + "' is not plane or quadratic");
+  if (reference_model != "plane" && reference_model != "quadratic" && reference_model != "quadric" && reference_model != "auto")
+    throw IndurationError("reference_model '" + reference_model + "' is not auto, plane, quadric or quadratic");
   if (!(min_height > 0)) throw IndurationError("min_height " + num(min_height) + " m must be > 0");
   if (!(min_area >= 0)) throw IndurationError("min_area " + num(min_area) + " m^2 must be >= 0");
   if (!(smoothing_px >= 0) || smoothing_px > 50) throw IndurationError("smoothing_px " + num(smoothing_px) + " must be 0 ... 50");
@@ -110,12 +111,14 @@ inline double tukey(double r, double c) {
 /** Heights of every known point above `ref` (NaN elsewhere). */
 cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref) {
   cv::Mat h(xyz.size(), CV_32F, cv::Scalar(kNaN));
-  for (int y = 0; y < xyz.rows; ++y) {
-    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
-    float* o = h.ptr<float>(y);
-    for (int x = 0; x < xyz.cols; ++x)
-      if (known(p[x])) o[x] = static_cast<float>(ref.height(Eigen::Vector3d(p[x][0], p[x][1], p[x][2])));
-  }
+  cv::parallel_for_(cv::Range(0, xyz.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
+      float* o = h.ptr<float>(y);
+      for (int x = 0; x < xyz.cols; ++x)
+        if (known(p[x])) o[x] = static_cast<float>(ref.height(Eigen::Vector3d(p[x][0], p[x][1], p[x][2])));
+    }
+  });
   return h;
 }
 
@@ -149,6 +152,133 @@ cv::Mat smoothFilled(const cv::Mat& h, double sigma, double gap_px) {
         if (std::isnan(out.at<float>(y, x)) && ws.at<float>(y, x) > 0.05f) out.at<float>(y, x) = vs.at<float>(y, x) / ws.at<float>(y, x);
   }
   return out;
+}
+
+using Vec10 = Eigen::Matrix<double, 10, 1>;
+
+Vec10 monomials(const Eigen::Vector3d& y) {
+  Vec10 m;
+  m << y.x() * y.x(), y.y() * y.y(), y.z() * y.z(), y.x() * y.y(), y.x() * y.z(), y.y() * y.z(), y.x(), y.y(), y.z(), 1.0;
+  return m;
+}
+
+/** Gradients of the monomials with respect to y (10 x 3). */
+Eigen::Matrix<double, 10, 3> monomialGradients(const Eigen::Vector3d& y) {
+  Eigen::Matrix<double, 10, 3> J = Eigen::Matrix<double, 10, 3>::Zero();
+  J.row(0) << 2 * y.x(), 0, 0;
+  J.row(1) << 0, 2 * y.y(), 0;
+  J.row(2) << 0, 0, 2 * y.z();
+  J.row(3) << y.y(), y.x(), 0;
+  J.row(4) << y.z(), 0, y.x();
+  J.row(5) << 0, y.z(), y.y();
+  J.row(6) << 1, 0, 0;
+  J.row(7) << 0, 1, 0;
+  J.row(8) << 0, 0, 1;
+  return J;
+}
+
+/** Weighted Taubin fit of an implicit quadric (normalised coordinates): min sum w F^2 / sum w |grad F|^2. */
+bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<double>& w, Vec10* theta) {
+  Eigen::Matrix<double, 10, 10> M = Eigen::Matrix<double, 10, 10>::Zero(), N = Eigen::Matrix<double, 10, 10>::Zero();
+  double ws = 0;
+  for (std::size_t i = 0; i < ys.size(); ++i) {
+    if (w[i] <= 0) continue;
+    const Vec10 m = monomials(ys[i]);
+    const Eigen::Matrix<double, 10, 3> J = monomialGradients(ys[i]);
+    M.noalias() += w[i] * m * m.transpose();
+    N.noalias() += w[i] * J * J.transpose();
+    ws += w[i];
+  }
+  if (ws <= 0) return false;
+  // eliminate the constant term (no gradient): c = -M_c9 theta' / M_99
+  const double m99 = M(9, 9);
+  if (!(m99 > 0)) return false;
+  const Eigen::Matrix<double, 9, 9> Mr = M.topLeftCorner<9, 9>() - M.topRightCorner<9, 1>() * M.bottomLeftCorner<1, 9>() / m99;
+  Eigen::Matrix<double, 9, 9> Nr = N.topLeftCorner<9, 9>();
+  Nr += 1e-12 * Nr.trace() * Eigen::Matrix<double, 9, 9>::Identity();
+  Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> es(Mr, Nr);
+  if (es.info() != Eigen::Success) return false;
+  const Eigen::Matrix<double, 9, 1> t = es.eigenvectors().col(0);
+  theta->head<9>() = t;
+  (*theta)(9) = -(M.bottomLeftCorner<1, 9>() * t)(0) / m99;
+  theta->normalize();
+  return theta->allFinite();
+}
+
+/** Robust (Tukey IRLS on geometric distances) fit of an implicit quadric to the points where `use` is set. */
+bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double max_scale, ReferenceSurface* ref) {
+  std::vector<Eigen::Vector3d> pts;
+  const int total = cv::countNonZero(use);
+  if (total < 200) return false;
+  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(total) / max_points))));
+  for (int y = 0; y < xyz.rows; y += step) {
+    const uchar* u = use.ptr<uchar>(y);
+    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < xyz.cols; x += step)
+      if (u[x] && known(p[x])) pts.emplace_back(p[x][0], p[x][1], p[x][2]);
+  }
+  if (pts.size() < 200) return false;
+  ReferenceSurface cur = *ref;
+  cur.model = "quadric";
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& p : pts) c += p;
+  c /= static_cast<double>(pts.size());
+  double sc = 0;
+  for (const auto& p : pts) sc += (p - c).squaredNorm();
+  sc = std::sqrt(sc / pts.size());
+  if (!(sc > 0)) return false;
+  cur.q_centre = c;
+  cur.q_scale = sc;
+  std::vector<Eigen::Vector3d> ys(pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) ys[i] = (pts[i] - c) / sc;
+  // start: the current reference's residuals (the RANSAC plane's, or the previous quadric's) with a wide cut-off
+  std::vector<double> w(pts.size()), r(pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) r[i] = ref->height(pts[i]);
+  for (int it = 0; it < 10; ++it) {
+    std::vector<double> a(r.size());
+    for (std::size_t i = 0; i < r.size(); ++i) a[i] = std::fabs(r[i]);
+    std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+    // first an unweighted fit (the start's residuals say nothing about a curved surface), then Tukey weights
+    // with a cut-off that narrows to the plane's (a few hundred um) as the fit settles
+    const double cap = it <= 2 ? 10 * max_scale : max_scale / 3.0;
+    const double scale = std::min(std::max(1.4826 * a[a.size() / 2], 1e-7), cap);
+    for (std::size_t i = 0; i < pts.size(); ++i) w[i] = it == 0 ? 1.0 : tukey(r[i], 4.685 * scale);
+    Vec10 theta;
+    if (!taubinQuadric(ys, w, &theta)) return false;
+    cur.coefficients = theta;
+    cur.q_sign = 1.0;
+    // orient: positive towards the camera (the origin) at the weighted median point
+    double vote = 0;
+    for (std::size_t i = 0; i < pts.size(); i += std::max<std::size_t>(1, pts.size() / 2000)) {
+      const Eigen::Vector3d g = monomialGradients(ys[i]).transpose() * theta;
+      vote += w[i] * (g.dot(-pts[i]) > 0 ? 1 : -1);
+    }
+    cur.q_sign = vote >= 0 ? 1.0 : -1.0;
+    for (std::size_t i = 0; i < pts.size(); ++i) r[i] = cur.height(pts[i]);
+  }
+  double s2 = 0;
+  int k = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    if (w[i] <= 0) continue;
+    s2 += r[i] * r[i];
+    ++k;
+  }
+  cur.rms = k > 0 ? std::sqrt(s2 / k) : 0;
+  cur.points = total;
+  // a tangent plane for messages and footprints: at the weighted mean point
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  double ws = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    mean += w[i] * pts[i];
+    ws += w[i];
+  }
+  if (ws > 0) mean /= ws;
+  const Eigen::Vector4d tp = cur.tangentPlane(mean);
+  cur.normal = tp.head<3>();
+  cur.d = tp(3);
+  cur.origin = mean;
+  *ref = cur;
+  return true;
 }
 
 /** Robust (Tukey IRLS) fit of the reference to the points where `use` is set, starting from `ref`. */
@@ -294,7 +424,41 @@ cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSur
 
 }  // namespace
 
+Eigen::Vector4d ReferenceSurface::tangentPlane(const Eigen::Vector3d& x) const {
+  if (model != "quadric") return plane();
+  // foot point of x, then the gradient there
+  Eigen::Vector3d y = (x - q_centre) / q_scale;
+  for (int i = 0; i < 6; ++i) {
+    const double F = monomials(y).dot(coefficients);
+    const Eigen::Vector3d g = monomialGradients(y).transpose() * coefficients;
+    const double g2 = g.squaredNorm();
+    if (!(g2 > 1e-30)) break;
+    y -= F * g / g2;
+  }
+  Eigen::Vector3d n = (monomialGradients(y).transpose() * coefficients) * q_sign;
+  if (!(n.norm() > 0)) return plane();
+  n.normalize();
+  const Eigen::Vector3d foot = q_centre + q_scale * y;
+  return Eigen::Vector4d(n.x(), n.y(), n.z(), -n.dot(foot));
+}
+
 double ReferenceSurface::height(const Eigen::Vector3d& x) const {
+  if (model == "quadric") {
+    // signed distance: Newton steps along the gradient to the foot point
+    const Eigen::Vector3d y0 = (x - q_centre) / q_scale;
+    Eigen::Vector3d y = y0;
+    double F0 = 0;
+    for (int i = 0; i < 4; ++i) {
+      const double F = monomials(y).dot(coefficients);
+      if (i == 0) F0 = F;
+      const Eigen::Vector3d g = monomialGradients(y).transpose() * coefficients;
+      const double g2 = g.squaredNorm();
+      if (!(g2 > 1e-30)) break;
+      y -= F * g / g2;
+    }
+    const double dist = (y - y0).norm() * q_scale;
+    return (F0 * q_sign >= 0 ? dist : -dist);
+  }
   double h = normal.dot(x) + d;
   if (model == "quadratic") {
     const Eigen::Vector3d q = x - origin;
@@ -352,32 +516,84 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   }
   ref.model = "plane";
 
-  // ---- alternate: robust reference on the healthy points, plaque mask from the heights
-  cv::Mat plaque_mask = cv::Mat::zeros(xyz.size(), CV_8U);
+  // ---- alternate: robust reference on the healthy points, plaque mask from the heights; "auto" does it for
+  // the plane and the quadric and keeps the quadric only if it fits the healthy skin clearly better
   const cv::Mat dil = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o.exclusion_margin_px + 1, 2 * o.exclusion_margin_px + 1));
+  struct Alternation {
+    ReferenceSurface ref;
+    cv::Mat plaque_mask;
+    double healthy_fraction = 1.0, scale = std::numeric_limits<double>::infinity();
+    bool ok = false;
+  };
+  auto alternate = [&](const std::string& model) {
+    Alternation a;
+    a.ref = ref;
+    a.plaque_mask = cv::Mat::zeros(xyz.size(), CV_8U);
+    const bool curved = model == "quadratic" || model == "quadric";
+    auto fit = [&](const cv::Mat& use, double scale) {
+      return model == "quadric" ? fitQuadric(xyz, use, o.fit_points, scale, &a.ref)
+                                : fitReference(xyz, use, model, o.fit_points, scale, &a.ref);
+    };
+    for (int it = 0; it < o.max_iterations; ++it) {
+      cv::Mat use = known_mask & ~a.plaque_mask;
+      a.healthy_fraction = cv::countNonZero(use) / static_cast<double>(res.known_points);
+      if (a.healthy_fraction < o.min_reference_fraction) return a;
+      // the first pass measures against the RANSAC plane itself: a fit to every point would be pulled towards
+      // large plaques; later passes fit the healthy skin only (a curved model first fits all points robustly
+      // with a wider cut-off: a curved surface leaves a plane's band)
+      if (it == 0 && curved && !fit(use, 3 * o.ransac_threshold)) return a;
+      if (it > 0 && !fit(use, o.ransac_threshold)) return a;
+      const cv::Mat hs = smoothNaN(heights(xyz, a.ref), o.smoothing_px);
+      const double threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
+      // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
+      // bias the next fit downwards, which raises more pixels above the threshold, and so on
+      cv::Mat next;
+      cv::dilate(largeRegions(hs > threshold, cloud.ray, a.ref, o.min_area), next, dil);
+      const double changed = cv::countNonZero(next != a.plaque_mask) / static_cast<double>(res.known_points);
+      a.plaque_mask = next;
+      if (it > 0 && changed < 1e-4) break;
+    }
+    a.ok = true;
+    // robust scale of the healthy skin's residuals
+    const cv::Mat use = known_mask & ~a.plaque_mask;
+    std::vector<double> r;
+    const int step = std::max(1, static_cast<int>(std::sqrt(cv::countNonZero(use) / 50000.0)));
+    for (int y = 0; y < xyz.rows; y += step)
+      for (int x = 0; x < xyz.cols; x += step)
+        if (use.at<uchar>(y, x)) {
+          const cv::Vec3f& p = xyz.at<cv::Vec3f>(y, x);
+          r.push_back(std::fabs(a.ref.height(Eigen::Vector3d(p[0], p[1], p[2]))));
+        }
+    if (r.size() >= 20) {
+      std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+      a.scale = 1.4826 * r[r.size() / 2];
+    }
+    return a;
+  };
+  Alternation best;
+  std::vector<std::pair<std::string, double>> candidates;
+  if (o.reference_model == "auto") {
+    const Alternation pl = alternate("plane");
+    const Alternation qu = alternate("quadric");
+    if (pl.ok) candidates.emplace_back("plane", pl.scale);
+    if (qu.ok) candidates.emplace_back("quadric", qu.scale);
+    // The quadric must halve the healthy skin's scatter: on a limb it reduces it by one or two orders of
+    // magnitude, while on flat skin a near-degenerate quadric (two sheets close to the plane) can shave a
+    // quarter off the noise's scale without describing anything.
+    best = (qu.ok && (!pl.ok || qu.scale < 0.5 * pl.scale)) ? qu : pl;
+  } else {
+    best = alternate(o.reference_model);
+    if (best.ok) candidates.emplace_back(o.reference_model, best.scale);
+  }
+  ref = best.ref;
+  ref.candidates = candidates;
+  cv::Mat plaque_mask = best.plaque_mask;
+  const double healthy_fraction = best.healthy_fraction;
+  double threshold = o.min_height;
   cv::Mat hs;
-  double healthy_fraction = 1.0, threshold = o.min_height;
-  for (int it = 0; it < o.max_iterations; ++it) {
-    cv::Mat use = known_mask & ~plaque_mask;
-    healthy_fraction = cv::countNonZero(use) / static_cast<double>(res.known_points);
-    if (healthy_fraction < o.min_reference_fraction) break;
-    // the first pass measures against the RANSAC plane itself: a fit to every point would be pulled
-    // towards large plaques; later passes fit the healthy skin only
-    // (the quadratic model first fits all points robustly with a wider cut-off: a curved surface leaves a
-    // plane's band)
-    if (it == 0 && o.reference_model == "quadratic" &&
-        !fitReference(xyz, use, o.reference_model, o.fit_points, 3 * o.ransac_threshold, &ref))
-      break;
-    if (it > 0 && !fitReference(xyz, use, o.reference_model, o.fit_points, o.ransac_threshold, &ref)) break;
-    hs = smoothNaN(heights(xyz, ref), o.smoothing_px);
-    threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
-    // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
-    // bias the next fit downwards, which raises more pixels above the threshold, and so on
-    cv::Mat next;
-    cv::dilate(largeRegions(hs > threshold, cloud.ray, ref, o.min_area), next, dil);
-    const double changed = cv::countNonZero(next != plaque_mask) / static_cast<double>(res.known_points);
-    plaque_mask = next;
-    if (it > 0 && changed < 1e-4) break;
+  if (!best.ok && healthy_fraction >= o.min_reference_fraction) {
+    res.warnings.push_back("the reference surface could not be fitted to the surface points");
+    return res;
   }
   if (healthy_fraction < o.min_reference_fraction) {
     res.warnings.push_back("no healthy skin left to fit the reference: only " +
@@ -433,7 +649,26 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
         if (flood.at<uchar>(y + 1, x + 1) == 0) mask.at<uchar>(y, x) = 255;
     // statistics: area and centroid over the whole plaque; heights over its interior (the plaque eroded by
     // interior_margin_px: the matching window blurs the edge into a ramp, which would pull the mean down)
-    const cv::Mat A = footprint(cloud.ray, ref, box);
+    // footprints on the reference's tangent plane at the region (the plane itself for the plane model)
+    ReferenceSurface local = ref;
+    if (ref.model == "quadric") {
+      Eigen::Vector3d m = Eigen::Vector3d::Zero();
+      int mk = 0;
+      for (int y = 0; y < box.height; ++y)
+        for (int x = 0; x < box.width; ++x)
+          if (mask.at<uchar>(y, x) && known(xyz.at<cv::Vec3f>(y + box.y, x + box.x))) {
+            const cv::Vec3f& q = xyz.at<cv::Vec3f>(y + box.y, x + box.x);
+            m += Eigen::Vector3d(q[0], q[1], q[2]);
+            ++mk;
+          }
+      if (mk > 0) {
+        const Eigen::Vector4d tp = ref.tangentPlane(m / mk);
+        local.model = "plane";
+        local.normal = tp.head<3>();
+        local.d = tp(3);
+      }
+    }
+    const cv::Mat A = footprint(cloud.ray, local, box);
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
         if (final_labels.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // already in a larger neighbour
@@ -446,7 +681,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       interior = mask;
     }
     Plaque p;
-    double area = 0, sh = 0, sh2 = 0, ssig2 = 0;
+    double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
     std::vector<float> hk;
     int px = 0, nc = 0;
@@ -457,6 +692,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
         area += A.at<double>(y, x);
         const float h = res.height_map.at<float>(y + box.y, x + box.x);
         if (std::isnan(h)) continue;
+        vol += std::max(0.0f, h) * A.at<double>(y, x);
         const cv::Vec3f& q = xyz.at<cv::Vec3f>(y + box.y, x + box.x);
         c += Eigen::Vector3d(q[0], q[1], q[2]);
         ++nc;
@@ -467,7 +703,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
         if (!cloud.sigma.empty()) {
           const float s = cloud.sigma.at<float>(y + box.y, x + box.x);
           const cv::Vec3f& r = cloud.ray.at<cv::Vec3f>(y + box.y, x + box.x);
-          const double cosi = std::fabs(ref.normal.x() * r[0] + ref.normal.y() * r[1] + ref.normal.z() * r[2]);
+          const double cosi = std::fabs(local.normal.x() * r[0] + local.normal.y() * r[1] + local.normal.z() * r[2]);
           if (std::isfinite(s)) ssig2 += (s * cosi) * (s * cosi);
         }
       }
@@ -509,6 +745,13 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     p.mean_height_sigma = std::sqrt(ssig2) / nk;
     p.pasi_class = pasiClass(p.mean_height, o.pasi_boundaries);
     p.pixels = px;
+    p.measured_fraction = px > 0 ? nc / static_cast<double>(px) : 0.0;
+    p.volume = p.measured_fraction > 0 ? vol / p.measured_fraction : 0.0;
+    if (p.measured_fraction < 0.9)
+      res.warnings.push_back("a plaque of " + num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
+                             std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
+                             ") is only partly measured: " + num(std::round(100 * p.measured_fraction)) +
+                             " % of its footprint has a height (its mean and volume rest on that part)");
     p.bbox = box;
     p.id = static_cast<int>(plaques.size()) + 1;
     for (int y = 0; y < box.height; ++y)

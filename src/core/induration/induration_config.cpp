@@ -139,9 +139,10 @@ const std::vector<std::pair<std::string, Field>>& table() {
       SKIN3D_DOUBLE("refine_max_shift", dense.refine_max_shift),
       SKIN3D_DOUBLE("max_sigma", dense.max_sigma),
       SKIN3D_DOUBLE("min_texture", dense.min_texture),
+      SKIN3D_DOUBLE("min_correlation", dense.min_correlation),
       SKIN3D_BOOL("vertical", dense.vertical),
       // --- induration (IndurationOptions)
-      SKIN3D_CHOICE("reference_model", induration.reference_model, {"plane", "quadratic"}),
+      SKIN3D_CHOICE("reference_model", induration.reference_model, {"auto", "plane", "quadric", "quadratic"}),
       SKIN3D_DOUBLE("min_height", induration.min_height),
       SKIN3D_DOUBLE("min_area", induration.min_area),
       SKIN3D_DOUBLE("max_height", induration.max_height),
@@ -205,6 +206,7 @@ void PipelineOptions::validate() const {
   require(dense.refine_max_shift > 0, "refine_max_shift", "must be > 0 px");
   require(dense.max_sigma > 0, "max_sigma", "must be > 0 px");
   require(dense.min_texture >= 0, "min_texture", "must be >= 0");
+  require(dense.min_correlation >= -1 && dense.min_correlation < 1, "min_correlation", "must be in [-1, 1)");
   // The string choices are checked when set; re-check here for options filled in by code.
   for (const auto& key : {"sgbm_mode", "subpixel", "reference_model"}) {
     PipelineOptions copy;

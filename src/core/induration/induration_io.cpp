@@ -97,7 +97,20 @@ void emitReference(YAML::Emitter& y, const IndurationResult& r) {
   y << YAML::Key << "d" << YAML::Value << s.d;
   y << YAML::Key << "rms_mm" << YAML::Value << kMm * s.rms;
   y << YAML::Key << "points" << YAML::Value << s.points;
-  if (s.model != "plane") {
+  y << YAML::Key << "candidates" << YAML::Value << YAML::BeginSeq;  // every model tried, robust scale of its healthy residuals
+  for (const auto& c : s.candidates)
+    y << YAML::Flow << YAML::BeginMap << YAML::Key << "model" << YAML::Value << c.first << YAML::Key << "scale_mm"
+      << YAML::Value << kMm * c.second << YAML::EndMap;
+  y << YAML::EndSeq;
+  if (s.model == "quadric") {
+    y << YAML::Key << "centre" << YAML::Value;
+    emitVector(y, s.q_centre);
+    y << YAML::Key << "scale_m" << YAML::Value << s.q_scale;
+    y << YAML::Key << "sign" << YAML::Value << s.q_sign;
+    y << YAML::Key << "coefficients" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+    for (int i = 0; i < 10; ++i) y << s.coefficients[i];
+    y << YAML::EndSeq;
+  } else if (s.model != "plane") {
     y << YAML::Key << "origin" << YAML::Value;
     emitVector(y, s.origin);
     y << YAML::Key << "e1" << YAML::Value;
@@ -124,6 +137,8 @@ void emitPlaque(YAML::Emitter& y, const Plaque& p) {
   emitNumber(y, kMm * p.mean_height_sigma);
   y << YAML::Key << "pasi_class" << YAML::Value << p.pasi_class;
   y << YAML::Key << "pixels" << YAML::Value << p.pixels;
+  y << YAML::Key << "measured_share" << YAML::Value << p.measured_fraction;
+  y << YAML::Key << "volume_mm3" << YAML::Value << p.volume * 1e9;
   y << YAML::Key << "bbox_px" << YAML::Value << YAML::Flow << YAML::BeginSeq << p.bbox.x << p.bbox.y << p.bbox.width
     << p.bbox.height << YAML::EndSeq;
   y << YAML::EndMap;

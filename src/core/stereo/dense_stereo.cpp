@@ -19,8 +19,8 @@ namespace {
 using common::num;
 using Clock = std::chrono::steady_clock;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr double kMinCorrelation = 0.5;  // windowed normalised correlation below this = unknown
-constexpr int kMaxCoarseDisparities = 640;  // deeper searches are done at a coarser level
+constexpr int kMaxCoarseDisparities = 640;
+constexpr float kHoleCorrelation = 0.5f;  // normalised correlation a fit needs where SGBM left a hole  // deeper searches are done at a coarser level
 constexpr float kMinSigma = 0.005f;  // px: floor of the reported sigma (interpolation and 8-bit quantisation)
 
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
@@ -376,8 +376,14 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
                                      o.speckle_window, static_cast<int>(std::lround(o.speckle_range)), sgbmMode(o.sgbm_mode));
   if (o.lr_max_diff <= 0) sgbm->setDisp12MaxDiff(-1);
   cv::Mat l8, r8, d16, dc;
-  pl[levels].convertTo(l8, CV_8U, 255.0);
-  pr[levels].convertTo(r8, CV_8U, 255.0);
+  // SGBM sees locally normalised images (zero mean, unit contrast over a few blocks, stretched to 8 bits): the
+  // cameras' gain, offset, gamma and vignetting differences drop out, and skin's few grey levels of texture
+  // fill the 8-bit range instead of being quantised away
+  {
+    const double ns = 1.5 * bs;
+    normaliseLocal(pl[levels], ns).convertTo(l8, CV_8U, 40.0, 128.0);
+    normaliseLocal(pr[levels], ns).convertTo(r8, CV_8U, 40.0, 128.0);
+  }
   sgbm->compute(l8, r8, d16);
   d16.convertTo(dc, CV_32F, 1.0 / 16.0);
   dc.setTo(kNaN, d16 < 0);  // invalid: OpenCV marks (min_disparity - 1) * 16
@@ -451,13 +457,15 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     v_full = v;
     sigma_full = r.sigma;
     // validity: the semi-global value known (nearest), the fit close to it, enough texture, correlation, sigma
-    cv::Mat known, sgm_up;
-    cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
+    // Holes of the semi-global map were filled from their surroundings for the start; the fit decides there
+    // (weak texture is aggregated by the fit's window instead of dropped), held to the filled field.
+    // (The fit is held to the semi-global value where there is one; in its holes the filled start may be off
+    // by more than that, and the fit's own statistics decide.)
+    cv::Mat sgm_up;
     cv::resize(dc, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
     const cv::Rect fine(c0, 0, lf.cols - c0, lf.rows);
-    known = known(fine).clone();
     sgm_up = sgm_up(fine) * s;
-    valid_full = known;
+    valid_full = cv::Mat(sgm_up.size(), CV_8U, cv::Scalar(255));
     const float max_shift = static_cast<float>(o.refine_max_shift * s);
     for (int y = 0; y < valid_full.rows; ++y) {
       uchar* vp = valid_full.ptr<uchar>(y);
@@ -468,13 +476,29 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
       const float* tx = r.texture.ptr<float>(y);
       for (int x = 0; x < valid_full.cols; ++x) {
         if (!vp[x]) continue;
-        if (!(sg[x] <= o.max_sigma) || cr[x] < kMinCorrelation || tx[x] < o.min_texture) {
+        // where the semi-global matcher had no answer, the fit alone must show that the views look alike
+        const float min_corr = std::isfinite(gp[x]) ? static_cast<float>(o.min_correlation) : kHoleCorrelation;
+        if (!(sg[x] <= o.max_sigma) || cr[x] < min_corr || tx[x] < o.min_texture) {
           vp[x] = 0;  // the images do not look alike here, or there is nothing to fit
-        } else if (!(std::fabs(dp[x] - gp[x]) <= max_shift)) {
+        } else if (std::isfinite(gp[x]) && !(std::fabs(dp[x] - gp[x]) <= max_shift)) {
           vp[x] = 0;  // the fit and the semi-global matcher disagree: one of them is wrong
         }
       }
     }
+  }
+  // Small islands of valid pixels (a few window sizes) in a sea of unknown ones are chance fits on noise
+  // (a dark background, normalised, is all noise): removed as SGBM's speckle filter does at the coarse level.
+  if (o.speckle_window > 0 && o.subpixel == "lk") {
+    cv::Mat d16(d_full.size(), CV_16S);
+    for (int y = 0; y < d16.rows; ++y) {
+      const float* dp = d_full.ptr<float>(y);
+      const uchar* vp = valid_full.ptr<uchar>(y);
+      short* q = d16.ptr<short>(y);
+      for (int x = 0; x < d16.cols; ++x)
+        q[x] = vp[x] && std::isfinite(dp[x]) ? static_cast<short>(std::clamp(std::lround(dp[x] * 4.0f), -32000L, 32000L)) : -32768;
+    }
+    cv::filterSpeckles(d16, -32768, o.speckle_window * s * s, static_cast<double>(4 * s) * o.speckle_range);
+    valid_full.setTo(0, d16 == -32768);
   }
   const auto t3 = Clock::now();
 

@@ -1,0 +1,120 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The skin scene (make_dataset skin): geometry, ray casting and the truth it reports, against closed forms.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "skin3d/sim/skin.h"
+
+using skin3d::sim::Hit;
+using skin3d::sim::SkinGeometry;
+using skin3d::sim::SkinPlaque;
+using skin3d::sim::SkinScene;
+
+namespace {
+
+SkinGeometry circularLimb(double dome = 0.0) {
+  SkinGeometry g;
+  g.semi_axis_y = g.semi_axis_z = 0.04;
+  SkinPlaque p;
+  p.centre = Eigen::Vector2d(0.01, 0.0);  // on the top
+  p.radii = Eigen::Vector2d(0.006, 0.005);
+  p.height = 0.6e-3;
+  p.ramp = 1e-3;
+  p.dome = dome;
+  p.irregularity = 0.0;
+  g.plaques.push_back(p);
+  SkinPlaque side = p;  // 45 deg around the limb
+  side.centre = Eigen::Vector2d(-0.02, 0.04 * M_PI / 4);
+  side.height = 0.2e-3;
+  g.plaques.push_back(side);
+  return g;
+}
+
+}  // namespace
+
+TEST(SimSkin, RaysHitTheLimbAndThePlaquesWhereTheyAre) {
+  const SkinScene scene(circularLimb(), 7);
+  Hit hit;
+  // straight down onto the top, away from the plaques: the base at z = R
+  ASSERT_TRUE(scene.intersect(Eigen::Vector3d(0.1, 0.0, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+  EXPECT_NEAR(hit.point.z(), 0.04, 1e-9);
+  EXPECT_NEAR(hit.normal.z(), 1.0, 1e-9);
+  // onto the flat top of the first plaque: R + H, normal still radial
+  ASSERT_TRUE(scene.intersect(Eigen::Vector3d(0.01, 0.0, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+  EXPECT_NEAR(hit.point.z(), 0.04 + 0.6e-3, 1e-8);
+  EXPECT_NEAR(hit.normal.z(), 1.0, 1e-4);
+  // along the radius at 45 deg onto the side plaque: R + 0.2 mm from the axis
+  const Eigen::Vector3d dir(0.0, -std::sin(M_PI / 4), -std::cos(M_PI / 4));
+  ASSERT_TRUE(scene.intersect(Eigen::Vector3d(-0.02, 0.0, 0.0) - 0.3 * dir, dir, &hit));
+  EXPECT_NEAR(std::hypot(hit.point.y(), hit.point.z()), 0.04 + 0.2e-3, 1e-8);
+  // beside the limb: nothing
+  EXPECT_FALSE(scene.intersect(Eigen::Vector3d(0.0, 0.05, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+  // beyond its end: nothing
+  EXPECT_FALSE(scene.intersect(Eigen::Vector3d(0.3, 0.0, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+}
+
+TEST(SimSkin, TruthOfAFlatTopPlaqueOnACircularLimb) {
+  const SkinScene scene(circularLimb(), 7);
+  const auto t = scene.plaqueTruth(0, 20e-6);
+  EXPECT_NEAR(t.top_height, 0.6e-3, 1e-9);  // radial = normal on a circle
+  // footprint: the outline ellipse (pi a b) on the cylinder (its arc length is t); top: shrunk by the ramp
+  EXPECT_NEAR(t.footprint_area / (M_PI * 0.006 * 0.005), 1.0, 0.01);
+  EXPECT_LT(t.top_area, t.footprint_area);
+  EXPECT_NEAR(t.top_area / (M_PI * 0.005 * 0.004), 1.0, 0.03);
+  EXPECT_LT(t.mean_height, t.top_height);
+  EXPECT_GT(t.mean_height, 0.5 * t.top_height);
+  EXPECT_NEAR(t.volume, t.mean_height * t.footprint_area, 1e-15);
+  EXPECT_NEAR(t.top_point.z(), 0.04 + 0.6e-3, 1e-9);
+  EXPECT_NEAR(t.centroid.x(), 0.01, 1e-5);
+  // a dome puts the peak at the centre, the mean lower than a flat top's
+  const SkinScene domed(circularLimb(0.5), 7);
+  const auto d = domed.plaqueTruth(0, 20e-6);
+  EXPECT_NEAR(d.top_height, 0.6e-3, 1e-9);
+  EXPECT_LT(d.mean_height, t.mean_height);
+}
+
+TEST(SimSkin, DistanceToAnEllipticBaseIsExact) {
+  SkinGeometry g;
+  g.semi_axis_y = 0.05;
+  g.semi_axis_z = 0.035;
+  const SkinScene scene(g, 1);
+  for (double phi : {-1.2, -0.5, 0.0, 0.3, 1.0}) {
+    const Eigen::Vector3d base(0.0, 0.05 * std::sin(phi), 0.035 * std::cos(phi));
+    for (double delta : {-0.5e-3, 0.0, 0.3e-3, 1.5e-3})
+      EXPECT_NEAR(scene.distanceToBase(base + delta * scene.baseNormal(phi)), delta, 1e-10) << phi << " " << delta;
+  }
+}
+
+TEST(SimSkin, RandomScenesAreDeterministicAndCoverTheRange) {
+  const SkinGeometry a = skin3d::sim::randomSkinGeometry(3), b = skin3d::sim::randomSkinGeometry(3);
+  ASSERT_EQ(a.plaques.size(), 5u);
+  EXPECT_EQ(a.semi_axis_y, b.semi_axis_y);
+  for (std::size_t i = 0; i < a.plaques.size(); ++i) EXPECT_EQ(a.plaques[i].height, b.plaques[i].height);
+  int below = 0;
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+    const SkinGeometry g = skin3d::sim::randomSkinGeometry(seed);
+    EXPECT_GE(g.semi_axis_y, 0.03);
+    EXPECT_LE(g.semi_axis_y, 0.06);
+    for (const auto& p : g.plaques) {
+      EXPECT_GE(p.height, 0.05e-3);
+      EXPECT_LE(p.height, 1.5e-3);
+      for (double bd : {0.125e-3, 0.375e-3, 0.625e-3, 0.875e-3}) EXPECT_GE(std::fabs(p.height - bd), 0.02e-3 - 1e-12);
+      below += p.height < 0.1e-3;
+      EXPECT_LE(std::fabs(p.centre.y() / g.meanRadius()), 55.0 * M_PI / 180.0 + 1e-12);
+    }
+    SkinScene scene(g, seed);  // valid
+  }
+  EXPECT_EQ(below, 20) << "one plaque below the 0.1 mm bar per scene";
+}
+
+TEST(SimSkin, BadGeometryIsNamed) {
+  SkinGeometry g = circularLimb();
+  g.plaques[0].ramp = 0.01;
+  try {
+    SkinScene s(g, 1);
+    FAIL() << "a ramp wider than the plaque was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("plaques[0].ramp"), std::string::npos) << e.what();
+  }
+}

@@ -73,7 +73,11 @@ struct DenseStereoOptions {
   /** Windowed normalised correlation of the fit below which = unknown. Two noisy views of the same texture
    *  correlate at SNR^2 / (1 + SNR^2) only: skin with texture about as strong as the sensor noise reaches ~0.5,
    *  so the threshold only rejects windows that do not look alike at all; sigma judges the rest. */
-  double min_correlation = 0.2;
+  double min_correlation = 0.5;
+  /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
+   *  with correlation >= 0.5), islands of valid pixels removed at full resolution. Off: only SGBM's answers are
+   *  refined (the workpiece's behaviour up to issue 15). */
+  bool weak_texture = false;
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };
 

@@ -140,6 +140,7 @@ const std::vector<std::pair<std::string, Field>>& table() {
       SKIN3D_DOUBLE("max_sigma", dense.max_sigma),
       SKIN3D_DOUBLE("min_texture", dense.min_texture),
       SKIN3D_DOUBLE("min_correlation", dense.min_correlation),
+      SKIN3D_BOOL("weak_texture", dense.weak_texture),
       SKIN3D_BOOL("vertical", dense.vertical),
       // --- induration (IndurationOptions)
       SKIN3D_CHOICE("reference_model", induration.reference_model, {"auto", "plane", "quadric", "quadratic"}),

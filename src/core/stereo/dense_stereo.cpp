@@ -379,7 +379,10 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   // SGBM sees locally normalised images (zero mean, unit contrast over a few blocks, stretched to 8 bits): the
   // cameras' gain, offset, gamma and vignetting differences drop out, and skin's few grey levels of texture
   // fill the 8-bit range instead of being quantised away
-  {
+  if (!o.weak_texture) {
+    pl[levels].convertTo(l8, CV_8U, 255.0);
+    pr[levels].convertTo(r8, CV_8U, 255.0);
+  } else {
     const double ns = 1.5 * bs;
     normaliseLocal(pl[levels], ns).convertTo(l8, CV_8U, 40.0, 128.0);
     normaliseLocal(pr[levels], ns).convertTo(r8, CV_8U, 40.0, 128.0);
@@ -465,7 +468,12 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     cv::resize(dc, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
     const cv::Rect fine(c0, 0, lf.cols - c0, lf.rows);
     sgm_up = sgm_up(fine) * s;
-    valid_full = cv::Mat(sgm_up.size(), CV_8U, cv::Scalar(255));
+    if (o.weak_texture) {
+      valid_full = cv::Mat(sgm_up.size(), CV_8U, cv::Scalar(255));
+    } else {  // only where the semi-global matcher answered
+      cv::resize(coarse_known, valid_full, lf.size(), 0, 0, cv::INTER_NEAREST);
+      valid_full = valid_full(fine).clone();
+    }
     const float max_shift = static_cast<float>(o.refine_max_shift * s);
     for (int y = 0; y < valid_full.rows; ++y) {
       uchar* vp = valid_full.ptr<uchar>(y);
@@ -480,7 +488,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
         const float min_corr = std::isfinite(gp[x]) ? static_cast<float>(o.min_correlation) : kHoleCorrelation;
         if (!(sg[x] <= o.max_sigma) || cr[x] < min_corr || tx[x] < o.min_texture) {
           vp[x] = 0;  // the images do not look alike here, or there is nothing to fit
-        } else if (std::isfinite(gp[x]) && !(std::fabs(dp[x] - gp[x]) <= max_shift)) {
+        } else if ((!o.weak_texture || std::isfinite(gp[x])) && !(std::fabs(dp[x] - gp[x]) <= max_shift)) {
           vp[x] = 0;  // the fit and the semi-global matcher disagree: one of them is wrong
         }
       }
@@ -488,7 +496,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   }
   // Small islands of valid pixels (a few window sizes) in a sea of unknown ones are chance fits on noise
   // (a dark background, normalised, is all noise): removed as SGBM's speckle filter does at the coarse level.
-  if (o.speckle_window > 0 && o.subpixel == "lk") {
+  if (o.weak_texture && o.speckle_window > 0 && o.subpixel == "lk") {
     cv::Mat d16(d_full.size(), CV_16S);
     for (int y = 0; y < d16.rows; ++y) {
       const float* dp = d_full.ptr<float>(y);

@@ -201,6 +201,11 @@ long long fileSize(const std::string& path) {
 std::string stemOf(const std::string& bag) {
   return bag.size() > 4 && bag.substr(bag.size() - 4) == ".bag" ? bag.substr(0, bag.size() - 4) : bag;
 }
+/** Pose of the right optical frame in the left one (left <- right). */
+Eigen::Isometry3d poseLeftRight(const geometry::StereoRig& rig) {
+  return Eigen::Isometry3d(Eigen::Translation3d(rig.rightCentre()) * Eigen::Quaterniond(rig.R_rl().transpose()));
+}
+
 std::string truthPath(const std::string& bag) { return stemOf(bag) + ".truth.yaml"; }
 std::string mapPath(const std::string& bag) { return stemOf(bag) + ".map.csv"; }
 std::string visiblePath(const std::string& bag) { return stemOf(bag) + ".visible.png"; }
@@ -246,8 +251,7 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
       std::cout << "  globe texture built in "
                 << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s" << std::endl;
   }
-  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
-                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
+  const Eigen::Isometry3d T_L_R = poseLeftRight(true_rig);
   Progress progress(images ? "rendering frames" : "measuring frames", frames, quiet);
   size_t total_landmarks = 0;
   int min_lm = 1 << 30, max_lm = 0;
@@ -337,6 +341,35 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
 
 // ------------------------------------------------------------------ workpiece
 
+/** Renders the pair once (noise-free irradiance) and writes `frames` exposures of it (realism with fresh noise
+ *  each), the camera_infos and the ground-truth pose. */
+void writeRenderedExposures(const sim::Scene& scene, const sim::DatasetConfig& c, const sim::RigConfig& rc,
+                            const geometry::StereoRig& true_rig, const stereo::RectifiedPair& info,
+                            const Eigen::Isometry3d& T_W_L, const sim::RenderOptions& ro, int frames, double fps,
+                            rosbag::Bag& bag, bool quiet) {
+  const Eigen::Isometry3d T_L_R = poseLeftRight(true_rig);
+  const auto t0 = std::chrono::steady_clock::now();
+  const cv::Mat left = sim::renderIrradiance(scene, true_rig.left(), T_W_L, ro);
+  const cv::Mat right = sim::renderIrradiance(scene, true_rig.right(), T_W_L * T_L_R, ro);
+  if (!quiet)
+    std::cout << "  rendered " << rc.width << "x" << rc.height << " pair (" << ro.supersample << "x" << ro.supersample
+              << " samples) in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
+              << " s" << std::endl;
+  Progress progress("exposures", frames, quiet);
+  for (int k = 0; k < frames; ++k) {
+    const ros::Time stamp = g_start + ros::Duration(k / fps);
+    const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
+    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
+    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
+    bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+    bag.write("stereo/right/image_raw", stamp,
+              toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
+    bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
+    progress.tick(k + 1);
+  }
+}
+
+
 int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet) {
   const sim::WorkpieceConfig& w = c.workpiece;
   const sim::RigConfig rc = w.scaledRig();
@@ -350,8 +383,6 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
   T_W_rig.translation() = -T_W_rig.linear() * Eigen::Vector3d(0.0, 0.0, w.working_distance);
   const Eigen::Isometry3d T_W_L = T_W_rig * rc.poseRigLeft();
   const Eigen::Isometry3d T_L_W = T_W_L.inverse();
-  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
-                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
 
   std::vector<Eigen::Vector3d> corners;
   for (double sx : {-0.5, 0.5})
@@ -371,32 +402,14 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
     throw sim::SimConfigError("workpiece", e.what());
   }
 
-  auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = std::chrono::steady_clock::now();
   const sim::WorkpieceScene scene(w.plate_size, w.plateaus, c.seed, w.texel);
   if (!quiet)
     std::cout << "  pattern built in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
               << " s" << std::endl;
   sim::RenderOptions ro;
   ro.supersample = c.images.supersample;
-  t0 = std::chrono::steady_clock::now();
-  const cv::Mat left = sim::renderIrradiance(scene, true_rig.left(), T_W_L, ro);
-  const cv::Mat right = sim::renderIrradiance(scene, true_rig.right(), T_W_L * T_L_R, ro);
-  if (!quiet)
-    std::cout << "  rendered " << rc.width << "x" << rc.height << " pair (" << ro.supersample << "x" << ro.supersample
-              << " samples) in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
-              << " s" << std::endl;
-  Progress progress("exposures", frames, quiet);
-  for (int k = 0; k < frames; ++k) {
-    const ros::Time stamp = g_start + ros::Duration(k / w.fps);
-    const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
-    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
-    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
-    bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
-    bag.write("stereo/right/image_raw", stamp,
-              toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
-    bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
-    progress.tick(k + 1);
-  }
+  writeRenderedExposures(scene, c, rc, true_rig, info, T_W_L, ro, frames, w.fps, bag, quiet);
 
   // Ground truth in the left optical frame.
   const Eigen::Vector3d n_L = T_L_W.linear() * Eigen::Vector3d::UnitZ();
@@ -448,8 +461,7 @@ cv::Mat skinVisibility(const sim::SkinScene& scene, const geometry::StereoRig& t
                        const geometry::StereoRig& calib_rig, const Eigen::Isometry3d& T_W_L) {
   const geometry::CameraInfo& li = info.left;
   const geometry::CameraInfo& ri = info.right;
-  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
-                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
+  const Eigen::Isometry3d T_L_R = poseLeftRight(true_rig);
   const Eigen::Isometry3d T_W_R = T_W_L * T_L_R, T_R_W = T_W_R.inverse();
   cv::Mat out(li.height, li.width, CV_8U, cv::Scalar(0));
   const double fx = li.P(0, 0), fy = li.P(1, 1), cx = li.P(0, 2), cy = li.P(1, 2);
@@ -558,8 +570,6 @@ int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Em
   T_W_rig.translation() = target - k.working_distance * zaxis;
   const Eigen::Isometry3d T_W_L = T_W_rig * rc.poseRigLeft();
   const Eigen::Isometry3d T_L_W = T_W_L.inverse();
-  const Eigen::Isometry3d T_L_R = Eigen::Isometry3d(Eigen::Translation3d(true_rig.rightCentre()) *
-                                                    Eigen::Quaterniond(true_rig.R_rl().transpose()));
   // points of interest for the rectification: skin both cameras see
   std::vector<Eigen::Vector3d> poi;
   for (double s = -0.5 * g.length; s <= 0.5 * g.length; s += 0.01)
@@ -581,24 +591,7 @@ int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Em
   ro.supersample = c.images.supersample;
   ro.light_dir = (R * Eigen::Vector3d(0.15, -0.25, 1.0)).normalized();  // a light beside the rig
   ro.ambient = 0.25;
-  auto t0 = std::chrono::steady_clock::now();
-  const cv::Mat left = sim::renderIrradiance(scene, true_rig.left(), T_W_L, ro);
-  const cv::Mat right = sim::renderIrradiance(scene, true_rig.right(), T_W_L * T_L_R, ro);
-  if (!quiet)
-    std::cout << "  rendered " << rc.width << "x" << rc.height << " pair (" << ro.supersample << "x" << ro.supersample
-              << " samples) in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
-              << " s" << std::endl;
-  Progress progress("exposures", frames, quiet);
-  for (int f = 0; f < frames; ++f) {
-    const ros::Time stamp = g_start + ros::Duration(f / k.fps);
-    const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(f) * 2;
-    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
-    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
-    bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
-    bag.write("stereo/right/image_raw", stamp, toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
-    bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
-    progress.tick(f + 1);
-  }
+  writeRenderedExposures(scene, c, rc, true_rig, info, T_W_L, ro, frames, k.fps, bag, quiet);
   const cv::Mat visible = skinVisibility(scene, true_rig, info, calib.rig, T_W_L);
   if (!cv::imwrite(visible_path, visible)) throw std::runtime_error("cannot write " + visible_path);
   truth << YAML::Key << "visible_skin" << YAML::Value << YAML::BeginMap;

@@ -8,11 +8,13 @@
  *     distance of a point to its known 8 neighbours; beyond mean + `sor_std_ratio` std of the cloud's
  *     distances = outlier; the same rule as PCL's StatisticalOutlierRemoval).
  *  2. Reference surface: a RANSAC plane (PCL SACSegmentation on a subsample) gives the start; then
- *     alternate (a) a robust (Tukey) least-squares fit of the reference model ("plane" or "quadratic":
- *     height over the plane as a quadric of the in-plane coordinates, for curved skin) to the points not
- *     marked as plaque, and (b) marking as plaque the regions of at least a quarter of `min_area` that
- *     stand above the detection threshold (see 4; dilated by `exclusion_margin_px`), until the mask stops
- *     changing. (Excluding every noisy pixel above the threshold instead would bias the fit downwards.)
+ *     alternate (a) a robust (Tukey) least-squares fit of the reference model ("plane"; "quadric": an implicit
+ *     quadric surface, Taubin fit, heights = distances to it, for a limb at any pose; "quadratic": height over
+ *     the plane as a quadric of the in-plane coordinates) to the points not marked as plaque, and (b) marking
+ *     as plaque the regions of at least a quarter of `min_area` that stand above the detection threshold
+ *     (see 4; dilated by `exclusion_margin_px`), until the mask stops changing. (Excluding every noisy pixel
+ *     above the threshold instead would bias the fit downwards.) "auto" alternates for the plane and the
+ *     quadric and keeps the quadric only if it halves the robust scatter of the healthy skin's heights.
  *  3. Height map: signed distance above the reference (m), smoothed with a Gaussian of `smoothing_px`
  *     (NaN-aware) for segmentation only; statistics use the unsmoothed heights.
  *  4. Plaques: connected regions (8-connected) of the smoothed map above the detection threshold
@@ -22,8 +24,9 @@
  *     matcher left the step edge unknown, the gap is bridged from both sides so the boundary falls in its
  *     middle), holes filled. Regions whose surroundings are less than 80 % known (the edge of the measured
  *     surface, islands of mismatches) or higher than `max_height` are ignored with a warning.
- *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference:
- *     the ray's intersection with it, |n . (dX/du x dX/dv)|), and over its interior (eroded by
+ *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
+ *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
+ *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by
  *     `interior_margin_px`: the matching window turns the edge into a ramp about a window wide) mean / std
  *     height, max height (the 99th percentile: one noisy pixel must not set it), and the PASImeter class of
  *     the mean height.

@@ -110,6 +110,9 @@ struct ImageConfig {
   double light_elevation = 0.5;       //!< rad; light from above-left of the rig (globe), fixed to the rig
 };
 
+/** @brief `rig` with fewer, larger pixels over the same field of view (resolution_scale in (0, 1]). */
+RigConfig scaleRig(const RigConfig& rig, double resolution_scale);
+
 struct WorkpieceConfig {
   Eigen::Vector2d plate_size = Eigen::Vector2d(0.12, 0.09);  //!< m
   std::vector<Plateau> plateaus;      //!< default: 0.1 ... 0.7 mm, 15 x 15 mm, in a 4 + 3 grid
@@ -121,7 +124,7 @@ struct WorkpieceConfig {
   double fps = 2.0;
   double texel = 20e-6;               //!< m, pattern resolution
   /** @brief The rig at resolution_scale. */
-  RigConfig scaledRig() const;
+  RigConfig scaledRig() const { return scaleRig(rig, resolution_scale); }
   void validate() const;
 };
 
@@ -142,7 +145,7 @@ struct SkinConfig {
   double fps = 2.0;
   double contrast = 1.0;              //!< skin albedo modulation (1: a few grey levels)
   bool scale_texture = true;          //!< psoriatic scale on plaque tops
-  RigConfig scaledRig() const;
+  RigConfig scaledRig() const { return scaleRig(rig, resolution_scale); }
   /** @brief The scene's geometry and pose for a seed (random or as configured). */
   SkinGeometry geometryFor(std::uint64_t seed, double* yaw, double* tilt, double* roll) const;
   void validate() const;

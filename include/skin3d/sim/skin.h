@@ -86,8 +86,8 @@ class SkinScene : public Scene {
   const SkinGeometry& geometry() const { return g_; }
   /** @brief Height of the skin above the base at surface coordinates (s, phi), m (0 outside plaques). */
   double heightAt(double s, double phi) const;
-  /** @brief Index of the plaque whose footprint holds (s, phi), or -1. */
-  int plaqueAt(double s, double phi) const;
+  /** @brief Index of the plaque whose footprint holds (s, phi), or -1; its height there in *height if given. */
+  int plaqueAt(double s, double phi, double* height = nullptr) const;
   /** @brief Surface coordinates (s, phi) of a limb-frame point (its elliptic angle). */
   Eigen::Vector2d surfaceCoordinates(const Eigen::Vector3d& x) const;
   /** @brief The raised surface point at (s, phi). */

@@ -72,7 +72,7 @@ struct DenseStereoOptions {
   double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
   /** Windowed normalised correlation of the fit below which = unknown. Two noisy views of the same texture
    *  correlate at SNR^2 / (1 + SNR^2) only: skin with texture about as strong as the sensor noise reaches ~0.5,
-   *  so the threshold only rejects windows that do not look alike at all; sigma judges the rest. */
+   *  so for skin (with weak_texture) 0.2 rejects only windows that do not look alike; sigma judges the rest. */
   double min_correlation = 0.5;
   /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
    *  with correlation >= 0.5), islands of valid pixels removed at full resolution. Off: only SGBM's answers are

@@ -154,6 +154,20 @@ cv::Mat smoothFilled(const cv::Mat& h, double sigma, double gap_px) {
   return out;
 }
 
+/** A regular subsample (at most about `max_points`) of the known points where `use` is set. */
+std::vector<Eigen::Vector3d> subsample(const cv::Mat& xyz, const cv::Mat& use, int max_points, int* total) {
+  std::vector<Eigen::Vector3d> pts;
+  *total = cv::countNonZero(use);
+  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(*total) / max_points))));
+  for (int y = 0; y < xyz.rows; y += step) {
+    const uchar* u = use.ptr<uchar>(y);
+    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < xyz.cols; x += step)
+      if (u[x] && known(p[x])) pts.emplace_back(p[x][0], p[x][1], p[x][2]);
+  }
+  return pts;
+}
+
 using Vec10 = Eigen::Matrix<double, 10, 1>;
 
 Vec10 monomials(const Eigen::Vector3d& y) {
@@ -207,16 +221,8 @@ bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<dou
 
 /** Robust (Tukey IRLS on geometric distances) fit of an implicit quadric to the points where `use` is set. */
 bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double max_scale, ReferenceSurface* ref) {
-  std::vector<Eigen::Vector3d> pts;
-  const int total = cv::countNonZero(use);
-  if (total < 200) return false;
-  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(total) / max_points))));
-  for (int y = 0; y < xyz.rows; y += step) {
-    const uchar* u = use.ptr<uchar>(y);
-    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
-    for (int x = 0; x < xyz.cols; x += step)
-      if (u[x] && known(p[x])) pts.emplace_back(p[x][0], p[x][1], p[x][2]);
-  }
+  int total = 0;
+  const std::vector<Eigen::Vector3d> pts = subsample(xyz, use, max_points, &total);
   if (pts.size() < 200) return false;
   ReferenceSurface cur = *ref;
   cur.model = "quadric";
@@ -284,17 +290,8 @@ bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double m
 /** Robust (Tukey IRLS) fit of the reference to the points where `use` is set, starting from `ref`. */
 bool fitReference(const cv::Mat& xyz, const cv::Mat& use, const std::string& model, int max_points, double max_scale,
                   ReferenceSurface* ref) {
-  // a regular subsample of the usable points
-  std::vector<Eigen::Vector3d> pts;
-  const int total = cv::countNonZero(use);
-  if (total < 50) return false;
-  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(total) / max_points))));
-  for (int y = 0; y < xyz.rows; y += step) {
-    const uchar* u = use.ptr<uchar>(y);
-    const cv::Vec3f* p = xyz.ptr<cv::Vec3f>(y);
-    for (int x = 0; x < xyz.cols; x += step)
-      if (u[x] && known(p[x])) pts.emplace_back(p[x][0], p[x][1], p[x][2]);
-  }
+  int total = 0;
+  const std::vector<Eigen::Vector3d> pts = subsample(xyz, use, max_points, &total);
   if (pts.size() < 50) return false;
   std::vector<double> w(pts.size(), 1.0), r(pts.size());
   ReferenceSurface cur = *ref;

@@ -92,7 +92,7 @@ std::string datasetKindName(DatasetKind kind) {
   return "?";
 }
 
-RigConfig WorkpieceConfig::scaledRig() const {
+RigConfig scaleRig(const RigConfig& rig, double resolution_scale) {
   RigConfig r = rig;
   r.width = std::max(1, static_cast<int>(std::lround(rig.width * resolution_scale)));
   r.height = std::max(1, static_cast<int>(std::lround(rig.height * resolution_scale)));
@@ -124,14 +124,6 @@ void WorkpieceConfig::validate() const {
   if (!(fps > 0) || !std::isfinite(fps)) bad("workpiece.fps", fps, "must be > 0");
   if (!(texel > 0) || texel > 1e-3) bad("workpiece.texel_um", texel * 1e6, "must be in (0, 1000]");
   scaledRig().makeRig();
-}
-
-RigConfig SkinConfig::scaledRig() const {
-  RigConfig r = rig;
-  r.width = std::max(1, static_cast<int>(std::lround(rig.width * resolution_scale)));
-  r.height = std::max(1, static_cast<int>(std::lround(rig.height * resolution_scale)));
-  r.pixel_size = rig.pixel_size * rig.width / r.width;
-  return r;
 }
 
 SkinGeometry SkinConfig::geometryFor(std::uint64_t seed, double* y, double* t, double* r) const {

@@ -108,21 +108,24 @@ double SkinScene::profile(std::size_t k, double s, double phi) const {
 
 double SkinScene::heightAt(double s, double phi) const {
   double h = 0.0;
-  for (std::size_t k = 0; k < boxes_.size(); ++k) {
-    const Box& b = boxes_[k];
-    if (s < b.s0 || s > b.s1 || phi < b.p0 || phi > b.p1) continue;
-    h = std::max(h, profile(k, s, phi));
-  }
+  plaqueAt(s, phi, &h);
   return h;
 }
 
-int SkinScene::plaqueAt(double s, double phi) const {
+int SkinScene::plaqueAt(double s, double phi, double* height) const {
+  int best = -1;
+  double hb = 0.0;
   for (std::size_t k = 0; k < boxes_.size(); ++k) {
     const Box& b = boxes_[k];
     if (s < b.s0 || s > b.s1 || phi < b.p0 || phi > b.p1) continue;
-    if (profile(k, s, phi) > 0) return static_cast<int>(k);
+    const double h = profile(k, s, phi);
+    if (h > hb) {
+      hb = h;
+      best = static_cast<int>(k);
+    }
   }
-  return -1;
+  if (height) *height = hb;
+  return best;
 }
 
 Eigen::Vector2d SkinScene::surfaceCoordinates(const Eigen::Vector3d& x) const {
@@ -263,10 +266,10 @@ float SkinScene::albedo(const Hit& hit) const {
   v *= 1.0 - c * 0.05 * (1.0 - smooth01(r / 0.025));
   v *= spots(sd, 11, s, t, 0.5e-3, 0.4, 30e-6, 70e-6, 0.05 * c, 0.12 * c);   // pores
   v *= spots(sd, 12, s, t, 4e-3, 0.15, 0.4e-3, 1.2e-3, 0.03 * c, 0.07 * c);  // freckles
-  const double h = heightAt(s, sc.y());
-  if (h > 0) {
-    const int k = plaqueAt(s, sc.y());
-    const double f = k >= 0 ? h / g_.plaques[static_cast<std::size_t>(k)].height : 0.0;
+  double h = 0.0;
+  const int k = plaqueAt(s, sc.y(), &h);
+  if (k >= 0) {
+    const double f = h / g_.plaques[static_cast<std::size_t>(k)].height;
     v *= 1.0 - 0.08 * std::min(1.0, 2.0 * f);  // erythema: a little darker
     if (g_.scale_texture && f > 0.5) {
       const NoiseTexture flakes{0.4e-3, 3, 0.6, hash64(sd + 4)};

@@ -1,0 +1,62 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: BSD-3-Clause
+"""A skin dataset's measurement against its truth: how much of the visible skin got a disparity, and each true
+plaque's nearest measured plaque (within 3 mm of its centroid) in the last frame.
+
+Usage: skin_check.py DATASET.bag RESULTS_DIR
+  DATASET.bag  made by `make_dataset skin` (reads DATASET.truth.yaml and DATASET.visible.png beside it)
+  RESULTS_DIR  of `process_bag --induration` on it (reads induration.yaml and the last frame's disparity.tiff)
+Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence) and per plaque: true top and mean
+height, angle around the limb, measured mean height, error, PASI class (measured/true), area and measured share.
+"""
+import os
+import sys
+
+import cv2
+import numpy as np
+import yaml
+
+
+def main():
+    if len(sys.argv) != 3:
+        sys.exit(__doc__)
+    stem = os.path.splitext(sys.argv[1])[0]
+    out = sys.argv[2]
+    for f in (stem + ".truth.yaml", stem + ".visible.png", out + "/induration.yaml", out + "/disparity.tiff"):
+        if not os.path.exists(f):
+            sys.exit("skin_check: no '%s'" % f)
+    vis = cv2.imread(stem + ".visible.png", cv2.IMREAD_UNCHANGED)
+    disp = cv2.imread(out + "/disparity.tiff", cv2.IMREAD_UNCHANGED)
+    if vis is None or disp is None or vis.shape != disp.shape:
+        sys.exit("skin_check: the visible-skin mask and the disparity map differ in size (same dataset?)")
+    m, k = vis > 0, np.isfinite(disp)
+    m60 = m & (vis <= 61)
+    print("visible skin with a disparity: %.1f %% (seen at <= 60 deg: %.1f %%); known pixels outside it: %d"
+          % (100.0 * (k & m).sum() / max(1, m.sum()), 100.0 * (k & m60).sum() / max(1, m60.sum()), (k & ~m).sum()))
+    truth = yaml.safe_load(open(stem + ".truth.yaml"))
+    frames = (yaml.safe_load(open(out + "/induration.yaml")) or {}).get("frames") or []
+    if not frames:
+        sys.exit("skin_check: no frame in %s/induration.yaml" % out)
+    last = frames[-1]
+    measured = last.get("plaques") or []
+    ref = last.get("reference") or {}
+    print("reference: %s (candidates: %s)" % (ref.get("model"), ", ".join(
+        "%s %.4f mm" % (c["model"], c["scale_mm"]) for c in ref.get("candidates") or [])))
+    print("| true top (mm) | true mean (mm) | around limb (deg) | measured mean (mm) | error (mm) | PASI | area (mm², true) | share |")
+    print("|---|---|---|---|---|---|---|---|")
+    for p in truth.get("plaques") or []:
+        c = np.array(p["centroid_left_m"])
+        best = min(measured, key=lambda q: np.linalg.norm(np.array(q["centroid_m"]) - c), default=None)
+        if best is None or np.linalg.norm(np.array(best["centroid_m"]) - c) > 3e-3:
+            print("| %.3f | %.3f | %.0f | not found | | %d | (%.0f) | |" % (
+                p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], p["pasi_class"], p["area_mm2"]))
+            continue
+        print("| %.3f | %.3f | %.0f | %.4f | %+.4f | %d/%d | %.0f (%.0f) | %.2f |" % (
+            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], best["mean_height_mm"],
+            best["mean_height_mm"] - p["height_mm"], best["pasi_class"], p["pasi_class"], best["area_mm2"],
+            p["area_mm2"], best.get("measured_share", float("nan"))))
+    print("measured plaques: %d" % len(measured))
+
+
+if __name__ == "__main__":
+    main()

@@ -6,8 +6,10 @@ plaque's nearest measured plaque (within 3 mm of its centroid) in the last frame
 Usage: skin_check.py DATASET.bag RESULTS_DIR
   DATASET.bag  made by `make_dataset skin` (reads DATASET.truth.yaml and DATASET.visible.png beside it)
   RESULTS_DIR  of `process_bag --induration` on it (reads induration.yaml and the last frame's disparity.tiff)
-Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence) and per plaque: true top and mean
-height, angle around the limb, measured mean height, error, PASI class (measured/true), area and measured share.
+Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence by both cameras: the working band)
+and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
+mean height, error, PASI class (measured/true), area and measured share; then a summary line over the plaques of
+at least 0.1 mm in the working band (the ones issue 15 requires).
 """
 import os
 import sys
@@ -42,20 +44,36 @@ def main():
     ref = last.get("reference") or {}
     print("reference: %s (candidates: %s)" % (ref.get("model"), ", ".join(
         "%s %.4f mm" % (c["model"], c["scale_mm"]) for c in ref.get("candidates") or [])))
-    print("| true top (mm) | true mean (mm) | around limb (deg) | measured mean (mm) | error (mm) | PASI | area (mm², true) | share |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| true top (mm) | true mean (mm) | around limb (deg) | incidence L/R (deg) | measured mean (mm) | error (mm) "
+          "| PASI | area (mm², true) | share |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    right = np.array(truth["rig_true"]["right_centre_in_left_m"])
+    required = found = pasi_ok = 0
+    worst = 0.0
     for p in truth.get("plaques") or []:
         c = np.array(p["centroid_left_m"])
+        n = np.array(p["normal_left"])
+        inc_l = np.degrees(np.arccos(np.clip(n @ (-c / np.linalg.norm(c)), -1, 1)))
+        inc_r = np.degrees(np.arccos(np.clip(n @ ((right - c) / np.linalg.norm(right - c)), -1, 1)))
+        req = p["height_mm"] >= 0.1 and max(inc_l, inc_r) <= 60
+        required += req
+        inc = "%.0f/%.0f%s" % (inc_l, inc_r, "" if max(inc_l, inc_r) <= 60 else " (outside)")
         best = min(measured, key=lambda q: np.linalg.norm(np.array(q["centroid_m"]) - c), default=None)
         if best is None or np.linalg.norm(np.array(best["centroid_m"]) - c) > 3e-3:
-            print("| %.3f | %.3f | %.0f | not found | | %d | (%.0f) | |" % (
-                p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], p["pasi_class"], p["area_mm2"]))
+            print("| %.3f | %.3f | %.0f | %s | not found | | %d | (%.0f) | |" % (
+                p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, p["pasi_class"], p["area_mm2"]))
             continue
-        print("| %.3f | %.3f | %.0f | %.4f | %+.4f | %d/%d | %.0f (%.0f) | %.2f |" % (
-            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], best["mean_height_mm"],
-            best["mean_height_mm"] - p["height_mm"], best["pasi_class"], p["pasi_class"], best["area_mm2"],
-            p["area_mm2"], best.get("measured_share", float("nan"))))
+        err = best["mean_height_mm"] - p["height_mm"]
+        if req:
+            found += 1
+            worst = max(worst, abs(err))
+            pasi_ok += best["pasi_class"] == p["pasi_class"]
+        print("| %.3f | %.3f | %.0f | %s | %.4f | %+.4f | %d/%d | %.0f (%.0f) | %.2f |" % (
+            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, best["mean_height_mm"], err,
+            best["pasi_class"], p["pasi_class"], best["area_mm2"], p["area_mm2"], best.get("measured_share", float("nan"))))
     print("measured plaques: %d" % len(measured))
+    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d"
+          % (required, found, worst, pasi_ok))
 
 
 if __name__ == "__main__":

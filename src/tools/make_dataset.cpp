@@ -570,13 +570,18 @@ int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Em
   T_W_rig.translation() = target - k.working_distance * zaxis;
   const Eigen::Isometry3d T_W_L = T_W_rig * rc.poseRigLeft();
   const Eigen::Isometry3d T_L_W = T_W_L.inverse();
-  // points of interest for the rectification: skin both cameras see
+  // points of interest for the rectification: skin both cameras see, under the true rig and under the
+  // calibration the rectification uses (a point at an image border may be inside under one and outside under
+  // the other: the rectification refuses such a point)
   std::vector<Eigen::Vector3d> poi;
+  auto seen = [](const geometry::StereoRig& rig, const Eigen::Vector3d& X) {
+    Eigen::Vector2d uvl, uvr;
+    return rig.project(X, &uvl, &uvr) && rig.left().inImage(uvl) && rig.right().inImage(uvr);
+  };
   for (double s = -0.5 * g.length; s <= 0.5 * g.length; s += 0.01)
     for (double phi = -1.4; phi <= 1.4; phi += 0.1) {
       const Eigen::Vector3d X = T_L_W * scene.surfacePoint(s, phi);
-      Eigen::Vector2d uvl, uvr;
-      if (true_rig.project(X, &uvl, &uvr) && true_rig.left().inImage(uvl) && true_rig.right().inImage(uvr)) poi.push_back(X);
+      if (seen(true_rig, X) && seen(calib.rig, X)) poi.push_back(X);
     }
   if (poi.size() < 10)
     throw sim::SimConfigError("skin", "the limb is not in both camera images at working distance " +

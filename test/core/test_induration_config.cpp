@@ -56,11 +56,11 @@ TEST(IndurationConfig, KeysAreUniqueAndCoverTheHeader) {
       "z_min", "z_max", "roi",
       // DenseStereoOptions but min/max_disparity and roi
       "coarse_max_width", "sgbm_mode", "block_size", "p1", "p2", "uniqueness_ratio", "lr_max_diff", "speckle_window",
-      "speckle_range", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "max_sigma", "min_texture",
+      "speckle_range", "slant_passes", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "max_sigma", "min_texture",
       "min_correlation", "weak_texture",
       "vertical",
       // IndurationOptions
-      "reference_model", "min_height", "min_area", "max_height", "smoothing_px", "edge_fraction", "exclusion_margin_px",
+      "reference_model", "min_height", "min_area", "max_height", "max_incidence_deg", "smoothing_px", "max_smoothing_px", "edge_fraction", "exclusion_margin_px",
       "interior_margin_px", "sor_std_ratio", "ransac_threshold", "fit_points", "max_iterations",
       "min_reference_fraction", "pasi_boundaries"};
   EXPECT_EQ(std::set<std::string>(promised.begin(), promised.end()), unique);

@@ -65,7 +65,13 @@ struct IndurationOptions {
   double min_height = 0.05e-3;       //!< m: a point this far above the reference belongs to a plaque
   double min_area = 4e-6;            //!< m^2: smaller regions are not plaques
   double max_height = 5e-3;          //!< m: higher regions are not skin plaques (ignored with a warning)
-  double smoothing_px = 2.0;         //!< Gaussian sigma for segmentation, px (0 = none)
+  /** deg: plaques are searched only where the reference surface faces both cameras within this angle (the
+   *  working band; beyond it one view is too foreshortened to measure reliably). 90 = everywhere. */
+  double max_incidence_deg = 60.0;
+  double smoothing_px = 2.0;         //!< Gaussian sigma for segmentation, px (0 = none): the smallest tried
+  /** px: the segmentation smoothing grows from smoothing_px (sqrt 2 steps) until 3 robust sigma of the smoothed
+   *  healthy heights are below 1.5 min_height, up to this (noisy skin needs more than a speckle plate). */
+  double max_smoothing_px = 24.0;
   double edge_fraction = 0.5;        //!< plaque boundary at this fraction of its median height
   int exclusion_margin_px = 5;       //!< plaque mask dilation when fitting the reference
   int interior_margin_px = 8;        //!< heights are measured this far inside the plaque boundary (matching-window ramp)
@@ -126,6 +132,8 @@ struct IndurationResult {
   std::vector<std::string> warnings;  //!< e.g. "no healthy skin left to fit the reference"
   bool reference_ok = false;   //!< false: no height map (too few points or no healthy skin)
   int known_points = 0, outliers_removed = 0;
+  double smoothing_px = 0;         //!< px: the segmentation smoothing chosen (see max_smoothing_px)
+  double band_fraction = 1;        //!< share of the known points within the working band (max_incidence_deg)
   double detection_threshold = 0;  //!< m: max(min_height, 3 robust sigma of the smoothed healthy-skin heights)
 };
 

@@ -63,6 +63,9 @@ struct DenseStereoOptions {
   double lr_max_diff = 1.0;      //!< px at the coarse level: left-right check tolerance
   int speckle_window = 100;      //!< px: connected blobs smaller than this are removed (0 = off)
   double speckle_range = 2.0;    //!< px: disparity step that separates blobs
+  /** Further semi-global passes on the right image resampled by the previous pass's smoothed disparity, so
+   *  that slanted and curved surfaces (the sides of a limb) look fronto-parallel to SGBM; 0 = none. */
+  int slant_passes = 1;
   // --- sub-pixel refinement
   std::string subpixel = "lk";   //!< "lk": local correlation fit (above); "sgbm": SGBM's own 1/16-px parabola
   int refine_window = 11;        //!< odd window of the local fit, px at each level
@@ -73,11 +76,11 @@ struct DenseStereoOptions {
   /** Windowed normalised correlation of the fit below which = unknown. Two noisy views of the same texture
    *  correlate at SNR^2 / (1 + SNR^2) only: skin with texture about as strong as the sensor noise reaches ~0.5,
    *  so for skin (with weak_texture) 0.2 rejects only windows that do not look alike; sigma judges the rest. */
-  double min_correlation = 0.5;
+  double min_correlation = 0.2;
   /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
    *  with correlation >= 0.5), islands of valid pixels removed at full resolution. Off: only SGBM's answers are
    *  refined (the workpiece's behaviour up to issue 15). */
-  bool weak_texture = false;
+  bool weak_texture = true;
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };
 
@@ -118,6 +121,9 @@ struct DenseCloud {
   cv::Mat xyz;              //!< CV_32FC3, m, in the left camera's (unrectified) optical frame: R^T * X_rect; NaN unknown
   cv::Mat sigma;            //!< CV_32F, m, 1 sigma of the point along its viewing ray (from the disparity sigma)
   cv::Mat ray;              //!< CV_32FC3, unit viewing ray of every pixel (known or not), same frame as xyz
+  /** The right camera's centre in the same frame (the left camera's is the origin); NaN if not known. */
+  cv::Vec3d right_centre{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
+                         std::numeric_limits<double>::quiet_NaN()};
 };
 
 /**

@@ -68,7 +68,9 @@ void emitOptions(YAML::Emitter& y, const IndurationOptions& o) {
   y << YAML::Key << "min_height_mm" << YAML::Value << kMm * o.min_height;
   y << YAML::Key << "min_area_mm2" << YAML::Value << kMm2 * o.min_area;
   y << YAML::Key << "max_height_mm" << YAML::Value << kMm * o.max_height;
+  y << YAML::Key << "max_incidence_deg" << YAML::Value << o.max_incidence_deg;
   y << YAML::Key << "smoothing_px" << YAML::Value << o.smoothing_px;
+  y << YAML::Key << "max_smoothing_px" << YAML::Value << o.max_smoothing_px;
   y << YAML::Key << "edge_fraction" << YAML::Value << o.edge_fraction;
   y << YAML::Key << "exclusion_margin_px" << YAML::Value << o.exclusion_margin_px;
   y << YAML::Key << "interior_margin_px" << YAML::Value << o.interior_margin_px;
@@ -358,6 +360,8 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
     y << YAML::Key << "valid_fraction" << YAML::Value << f.valid_fraction;
     y << YAML::Key << "known_points" << YAML::Value << r.known_points;
     y << YAML::Key << "outliers_removed" << YAML::Value << r.outliers_removed;
+    y << YAML::Key << "smoothing_px" << YAML::Value << r.smoothing_px;
+    y << YAML::Key << "band_fraction" << YAML::Value << r.band_fraction;
     y << YAML::Key << "detection_threshold_mm" << YAML::Value << kMm * r.detection_threshold;
     emitReference(y, r);
     y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;

@@ -123,6 +123,8 @@ void validate(const cv::Mat& left, const cv::Mat& right, const DenseStereoOption
     throw DenseStereoError("lr_max_diff, refine_max_shift, max_sigma, min_texture, uniqueness_ratio, speckle_* and p1/p2 "
                            "must be >= 0 (refine_max_shift and max_sigma > 0)");
   if (o.p1 > 0 && o.p2 > 0 && o.p2 <= o.p1) throw DenseStereoError("p2 must be larger than p1");
+  if (o.slant_passes < 0 || o.slant_passes > 3)
+    throw DenseStereoError("slant_passes " + std::to_string(o.slant_passes) + " must be 0 ... 3");
 }
 
 /**
@@ -167,6 +169,54 @@ void remapCatmullRom(const cv::Mat& src, const cv::Mat& mapx, const cv::Mat& map
       }
     }
   });
+}
+
+/**
+ * One semi-global pass that follows slanted surfaces: the right image is resampled along each row by a smooth
+ * prior of the disparity (the previous pass, holes filled from their surroundings, smoothed over a few blocks), so
+ * that in the resampled pair a slanted or curved surface is nearly fronto-parallel and SGBM's square blocks and
+ * its smoothness penalty fit it again. SGBM then searches only a residual e in [-16, 16) px around the prior:
+ * d(x) = e + P(x - e). New answers replace the previous ones; where the pass finds none, the previous value stays.
+ */
+cv::Mat followSlant(const cv::Mat& l8, const cv::Mat& r8, const cv::Mat& dc, const cv::Ptr<cv::StereoSGBM>& base,
+                    const DenseStereoOptions& o) {
+  constexpr int kResidual = 16;
+  cv::Mat prior = fillHoles(dc);
+  const double smooth = 2.0 * o.block_size;
+  cv::GaussianBlur(prior, prior, cv::Size(), smooth, smooth, cv::BORDER_REPLICATE);
+  cv::Mat mapx(dc.size(), CV_32F), mapy(dc.size(), CV_32F);
+  for (int y = 0; y < dc.rows; ++y) {
+    const float* p = prior.ptr<float>(y);
+    float* mx = mapx.ptr<float>(y);
+    float* my = mapy.ptr<float>(y);
+    for (int x = 0; x < dc.cols; ++x) {
+      mx[x] = static_cast<float>(x) - p[x];
+      my[x] = static_cast<float>(y);
+    }
+  }
+  cv::Mat rw, e16;
+  cv::remap(r8, rw, mapx, mapy, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  auto sgbm = cv::StereoSGBM::create(-kResidual, 2 * kResidual, base->getBlockSize(), base->getP1(), base->getP2(),
+                                     base->getDisp12MaxDiff(), 0, base->getUniquenessRatio(), base->getSpeckleWindowSize(),
+                                     base->getSpeckleRange(), base->getMode());
+  sgbm->compute(l8, rw, e16);
+  cv::Mat out = dc.clone();
+  const short invalid = static_cast<short>((-kResidual - 1) * 16);
+  for (int y = 0; y < dc.rows; ++y) {
+    const short* e = e16.ptr<short>(y);
+    const float* p = prior.ptr<float>(y);
+    float* d = out.ptr<float>(y);
+    for (int x = 0; x < dc.cols; ++x) {
+      if (e[x] <= invalid) continue;
+      const float r = e[x] / 16.0f;
+      // the matched point of the resampled right image lies at x - r; its prior was read there
+      const float xs = std::clamp(static_cast<float>(x) - r, 0.f, static_cast<float>(dc.cols - 1));
+      const int x0 = std::min(static_cast<int>(xs), dc.cols - 2);
+      const float f = xs - static_cast<float>(x0);
+      d[x] = r + (1 - f) * p[x0] + f * p[x0 + 1];
+    }
+  }
+  return out;
 }
 
 /** Result of the local fit at one level. */
@@ -390,6 +440,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   sgbm->compute(l8, r8, d16);
   d16.convertTo(dc, CV_32F, 1.0 / 16.0);
   dc.setTo(kNaN, d16 < 0);  // invalid: OpenCV marks (min_disparity - 1) * 16
+  for (int pass = 0; pass < o.slant_passes; ++pass) dc = followSlant(l8, r8, dc, sgbm, o);
   const auto t2 = Clock::now();
   const cv::Rect coarse_roi(pad / s, margin_y / s, std::max(1, roi.width / s), std::max(1, roi.height / s));
   const cv::Rect coarse_roi_c = coarse_roi & cv::Rect(0, 0, dc.cols, dc.rows);
@@ -579,6 +630,11 @@ DenseCloud triangulateDisparity(const DisparityMap& map, const geometry::CameraI
   c.xyz = cv::Mat(map.disparity.size(), CV_32FC3, cv::Scalar::all(kNaN));
   c.sigma = cv::Mat(map.disparity.size(), CV_32F, cv::Scalar(kNaN));
   c.ray = cv::Mat(map.disparity.size(), CV_32FC3);
+  {
+    // the right camera sits at x = B on the rectified x axis: B = fx B / fx
+    const Eigen::Vector3d rc = Rt * Eigen::Vector3d(fb / fx, 0, 0);
+    c.right_centre = cv::Vec3d(rc.x(), rc.y(), rc.z());
+  }
   const bool have_sigma = !map.sigma.empty();
   for (int y = 0; y < map.disparity.rows; ++y) {
     const float* dp = map.disparity.ptr<float>(y);

@@ -289,6 +289,19 @@ TEST(IndurationIo, HeightMapAutomaticScaleOutlinesAndSize) {
   // ... but at least 0.25 mm.
   cv::Mat flat(rows, cols, CV_32F, cv::Scalar(0.01e-3f));
   EXPECT_TRUE(differing(heightMapImage(flat, cv::Mat(), {}, 0.0), heightMapImage(flat, cv::Mat(), {}, 0.25)).empty());
+  // With plaques, 1.25 x the highest plaque's max height, whatever lies far above the reference elsewhere
+  // (skin: the limb's silhouette, millimetres off, on 5 % of the points).
+  {
+    cv::Mat skin = h.clone();
+    skin(cv::Rect(0, 0, cols, 12)).setTo(20e-3f);  // 2880 of 48000 px at 20 mm
+    Plaque top;
+    top.id = 1;
+    top.mean_height = 0.5e-3;
+    top.max_height = 0.8e-3;
+    top.bbox = r2;
+    EXPECT_TRUE(differing(heightMapImage(skin, cv::Mat(), {top}, 0.0), heightMapImage(skin, cv::Mat(), {top}, 1.0)).empty());
+    EXPECT_FALSE(differing(heightMapImage(skin, cv::Mat(), {}, 0.0), heightMapImage(skin, cv::Mat(), {}, 1.0)).empty());  // p99: 20 mm
+  }
 
   // A plaque's outline is drawn in white.
   cv::Mat labels(rows, cols, CV_32S, cv::Scalar(0));

@@ -38,8 +38,9 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
                      const std::string& frame_id, const std::string& source);
 
 /**
- * @brief False-colour picture of a height map (CV_32F, m, NaN unknown): heights 0 ... `max_mm` (0 = the
- * 99th percentile of the known heights, at least 0.25 mm) in a perceptual colour map, unknown pixels dark
+ * @brief False-colour picture of a height map (CV_32F, m, NaN unknown): heights 0 ... `max_mm` (0 = 1.25 x the
+ * highest plaque's max height, or with no plaque the 99th percentile of the known heights; at least 0.25 mm)
+ * in a perceptual colour map, unknown pixels dark
  * grey, plaque outlines (labels CV_32S, may be empty) in white with their id and mean height in mm, and a
  * vertical colour scale bar labelled in mm. Wide maps are shrunk to at most `max_width` px.
  * @return 8-bit BGR image.

@@ -7,7 +7,9 @@
  *  1. Region of interest of the left rectified image (bounds the time on 13-megapixel images).
  *  2. Coarse level: the pair is halved until it is at most `coarse_max_width` wide; OpenCV's semi-global
  *     matcher (StereoSGBM) runs there on the disparity range of the working depths, left-right checked
- *     (a right-to-left pass; disagreement > `lr_max_diff` px at that level = unknown), speckles removed.
+ *     (a right-to-left pass; disagreement > `lr_max_diff` px at that level = unknown), speckles removed;
+ *     then `slant_passes` passes on the right image resampled by the previous, smoothed disparity (a residual
+ *     of +-16 px searched), which makes slanted and curved surfaces look fronto-parallel to SGBM's blocks.
  *  3. Refinement, coarse to fine up to full resolution: iterative local correlation fit (1-D Lucas-Kanade
  *     along the rows, plus a vertical term that absorbs residual rectification error) on locally
  *     normalised images (zero mean, unit contrast in a window: gain, offset and gamma differences
@@ -78,8 +80,8 @@ struct DenseStereoOptions {
    *  so for skin (with weak_texture) 0.2 rejects only windows that do not look alike; sigma judges the rest. */
   double min_correlation = 0.2;
   /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
-   *  with correlation >= 0.5), islands of valid pixels removed at full resolution. Off: only SGBM's answers are
-   *  refined (the workpiece's behaviour up to issue 15). */
+   *  with correlation >= 0.5), islands of valid pixels removed at full resolution; the default since issue 15.
+   *  Off: only SGBM's answers are refined (the speckle plate's matcher before issue 15). */
   bool weak_texture = true;
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };

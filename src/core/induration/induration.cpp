@@ -715,6 +715,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   }
   const int n = cv::connectedComponentsWithStats(above, lab, stats, cents, 8, CV_32S);
   std::vector<Plaque> plaques;
+  std::vector<std::pair<double, std::string>> at_edge;  // ignored regions at the edge: area, description
   cv::Mat final_labels(xyz.size(), CV_32S, cv::Scalar(0));
   for (int k = 1; k < n; ++k) {
     const cv::Rect bb(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
@@ -829,10 +830,10 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       const int ring_n = cv::countNonZero(ring), ring_known = cv::countNonZero(ring & known_pad);
       const double mean_h = sh / static_cast<double>(hk.size());
       if (ring_n == 0 || ring_known < 0.8 * ring_n) {
-        res.warnings.push_back("a raised region of " + num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
-                               std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
-                               ") was ignored: it lies at the edge of the measured surface (" +
-                               num(std::round(100.0 * ring_known / std::max(1, ring_n))) + " % of its surroundings known)");
+        at_edge.emplace_back(area, num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
+                                       std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
+                                       "), " + num(std::round(100.0 * ring_known / std::max(1, ring_n))) +
+                                       " % of its surroundings known");
         continue;
       }
       if (mean_h > o.max_height) {
@@ -882,6 +883,17 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       if (l) l = new_id[l];
     }
   res.labels = final_labels;
+  // Regions at the edge of the measured surface: one warning (a limb's silhouette can leave dozens), the
+  // three largest named.
+  if (!at_edge.empty()) {
+    std::sort(at_edge.begin(), at_edge.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    std::string list;
+    for (size_t i = 0; i < std::min<size_t>(3, at_edge.size()); ++i) list += (i ? "; " : "") + at_edge[i].second;
+    res.warnings.push_back(at_edge.size() == 1
+                               ? "a raised region of " + list + " was ignored: it lies at the edge of the measured surface"
+                               : std::to_string(at_edge.size()) + " raised regions were ignored: they lie at the edge of the "
+                                 "measured surface (their height above the reference means nothing); the largest: " + list);
+  }
   if (res.plaques.empty()) res.warnings.push_back("no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference");
   return res;
 }

@@ -412,7 +412,15 @@ cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const s
     throw std::invalid_argument("heightMapImage: the labels must be CV_32S of the height map's size (" +
                                 std::to_string(height_map.cols) + "x" + std::to_string(height_map.rows) + ")");
 
-  // Colour scale: 0 ... max_mm (automatic: the 99th percentile of the known heights, at least 0.25 mm).
+  // Colour scale: 0 ... max_mm (automatic: 1.25 x the highest plaque's max height, or without plaques the 99th
+  // percentile of the known heights; at least 0.25 mm). Plaques first: on skin a few per cent of the points (the
+  // limb's silhouette, the background) lie millimetres off the reference and would squeeze the plaques into
+  // the bottom colour.
+  if (max_mm == 0 && !plaques.empty()) {
+    double top = 0;
+    for (const auto& p : plaques) top = std::max(top, kMm * p.max_height);
+    max_mm = std::max(0.25, 1.25 * top);
+  }
   if (max_mm == 0) {
     std::vector<float> known;
     for (int r = 0; r < height_map.rows; ++r) {

@@ -171,6 +171,22 @@ void remapCatmullRom(const cv::Mat& src, const cv::Mat& mapx, const cv::Mat& map
   });
 }
 
+/** Remap maps of a row shift: mapx = x + x_offset - d(x, y), mapy = y + v(x, y) (v empty: 0). */
+void rowShiftMaps(const cv::Mat& d, const cv::Mat& v, int x_offset, cv::Mat& mapx, cv::Mat& mapy) {
+  mapx.create(d.size(), CV_32F);
+  mapy.create(d.size(), CV_32F);
+  for (int y = 0; y < d.rows; ++y) {
+    const float* dp = d.ptr<float>(y);
+    const float* vp = v.empty() ? nullptr : v.ptr<float>(y);
+    float* mx = mapx.ptr<float>(y);
+    float* my = mapy.ptr<float>(y);
+    for (int x = 0; x < d.cols; ++x) {
+      mx[x] = static_cast<float>(x + x_offset) - dp[x];
+      my[x] = static_cast<float>(y) + (vp ? vp[x] : 0.f);
+    }
+  }
+}
+
 /**
  * One semi-global pass that follows slanted surfaces: the right image is resampled along each row by a smooth
  * prior of the disparity (the previous pass, holes filled from their surroundings, smoothed over a few blocks), so
@@ -184,17 +200,8 @@ cv::Mat followSlant(const cv::Mat& l8, const cv::Mat& r8, const cv::Mat& dc, con
   cv::Mat prior = fillHoles(dc);
   const double smooth = 2.0 * o.block_size;
   cv::GaussianBlur(prior, prior, cv::Size(), smooth, smooth, cv::BORDER_REPLICATE);
-  cv::Mat mapx(dc.size(), CV_32F), mapy(dc.size(), CV_32F);
-  for (int y = 0; y < dc.rows; ++y) {
-    const float* p = prior.ptr<float>(y);
-    float* mx = mapx.ptr<float>(y);
-    float* my = mapy.ptr<float>(y);
-    for (int x = 0; x < dc.cols; ++x) {
-      mx[x] = static_cast<float>(x) - p[x];
-      my[x] = static_cast<float>(y);
-    }
-  }
-  cv::Mat rw, e16;
+  cv::Mat mapx, mapy, rw, e16;
+  rowShiftMaps(prior, cv::Mat(), 0, mapx, mapy);
   cv::remap(r8, rw, mapx, mapy, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   auto sgbm = cv::StereoSGBM::create(-kResidual, 2 * kResidual, base->getBlockSize(), base->getP1(), base->getP2(),
                                      base->getDisp12MaxDiff(), 0, base->getUniquenessRatio(), base->getSpeckleWindowSize(),
@@ -242,18 +249,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   cv::Mat Rw, Rxw, Ryw, e, a, b, saa, sab, sbb, sae, sbe;
   const int big = std::max(3, 4 * window + 1) | 1;  // the vertical shift is a smooth field: averaged widely
   // where each left pixel looks in the right image under the current field
-  auto fillMaps = [&]() {
-    for (int y = 0; y < L.rows; ++y) {
-      const float* dp = d.ptr<float>(y);
-      const float* vp = v.ptr<float>(y);
-      float* mx = mapx.ptr<float>(y);
-      float* my = mapy.ptr<float>(y);
-      for (int x = 0; x < L.cols; ++x) {
-        mx[x] = static_cast<float>(x + x_offset) - dp[x];
-        my[x] = static_cast<float>(y) + vp[x];
-      }
-    }
-  };
+  auto fillMaps = [&]() { rowShiftMaps(d, v, x_offset, mapx, mapy); };
   for (int it = 0; it < iterations; ++it) {
     fillMaps();
     remapCatmullRom(R, mapx, mapy, Rw);

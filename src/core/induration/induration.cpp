@@ -626,11 +626,8 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       if (it > 0 && !fit(use, o.ransac_threshold)) return a;
       const cv::Mat h = heights(xyz, a.ref);
       // the smoothing is chosen on the healthy skin: from the second pass on, once the plaques are masked
-      // (searched from smoothing_px at the second pass; later passes, whose masks change little, start from the
-      // choice so far and only widen it if the noise asks for it: one smoothing of the map instead of six)
       a.smoothing = it == 0 ? o.smoothing_px
-                            : adaptiveSmoothing(h, use, it == 1 ? o.smoothing_px : a.smoothing, o.max_smoothing_px,
-                                                o.min_height, o.ransac_threshold);
+                            : adaptiveSmoothing(h, use, o.smoothing_px, o.max_smoothing_px, o.min_height, o.ransac_threshold);
       const cv::Mat hs = smoothNaN(h, a.smoothing);
       const double threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
       // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would

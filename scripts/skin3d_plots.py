@@ -198,7 +198,7 @@ class IndurationRun:
                     continue
                 used[i].add(best)
                 q = f["plaques"][best]
-                h.append(q["mean_height_mm"]), a.append(q["area_mm2"]), k.append(q["pasi_class"])
+                h.append(q.get("top_height_mm", q["mean_height_mm"])), a.append(q["area_mm2"]), k.append(q["pasi_class"])
             rows.append({"true_mm": p["height_mm"], "true_area_mm2": p["area_mm2"], "found": len(h), "frames": len(frames),
                          "mean_mm": float(np.mean(h)) if h else None,
                          "std_mm": float(np.std(h, ddof=1)) if len(h) > 1 else None,

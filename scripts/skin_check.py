@@ -8,7 +8,8 @@ Usage: skin_check.py DATASET.bag RESULTS_DIR
   RESULTS_DIR  of `process_bag --induration` on it (reads induration.yaml and the last frame's disparity.tiff)
 Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence by both cameras: the working band)
 and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
-mean height, error, PASI class (measured/true), area and measured share; then a summary line over the plaques of
+top height and its error, the measured mean over the interior and over the footprint (volume / area), PASI class
+(measured/true), area and measured share; then a summary line over the plaques of
 at least 0.1 mm in the working band (the ones issue 15 requires).
 """
 import os
@@ -44,9 +45,9 @@ def main():
     ref = last.get("reference") or {}
     print("reference: %s (candidates: %s)" % (ref.get("model"), ", ".join(
         "%s %.4f mm" % (c["model"], c["scale_mm"]) for c in ref.get("candidates") or [])))
-    print("| true top (mm) | true mean (mm) | around limb (deg) | incidence L/R (deg) | measured mean (mm) | error (mm) "
-          "| PASI | area (mm², true) | share |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| true top (mm) | true mean (mm) | around limb (deg) | incidence L/R (deg) | measured top (mm) | error (mm) "
+          "| measured mean: interior, footprint (mm) | PASI | area (mm², true) | share |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     right = np.array(truth["rig_true"]["right_centre_in_left_m"])
     required = found = pasi_ok = 0
     worst = 0.0
@@ -60,20 +61,27 @@ def main():
         inc = "%.0f/%.0f%s" % (inc_l, inc_r, "" if max(inc_l, inc_r) <= 60 else " (outside)")
         best = min(measured, key=lambda q: np.linalg.norm(np.array(q["centroid_m"]) - c), default=None)
         if best is None or np.linalg.norm(np.array(best["centroid_m"]) - c) > 3e-3:
-            print("| %.3f | %.3f | %.0f | %s | not found | | %d | (%.0f) | |" % (
+            print("| %.3f | %.3f | %.0f | %s | not found | | | %d | (%.0f) | |" % (
                 p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, p["pasi_class"], p["area_mm2"]))
             continue
-        err = best["mean_height_mm"] - p["height_mm"]
+        top = best.get("top_height_mm", best["mean_height_mm"])  # results before the top height: the mean
+        err = top - p["height_mm"]
         if req:
             found += 1
             worst = max(worst, abs(err))
             pasi_ok += best["pasi_class"] == p["pasi_class"]
-        print("| %.3f | %.3f | %.0f | %s | %.4f | %+.4f | %d/%d | %.0f (%.0f) | %.2f |" % (
-            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, best["mean_height_mm"], err,
+        print("| %.3f | %.3f | %.0f | %s | %.4f | %+.4f | %.3f, %.3f | %d/%d | %.0f (%.0f) | %.2f |" % (
+            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, top, err, best["mean_height_mm"],
+            best.get("volume_mm3", float("nan")) / best["area_mm2"],
             best["pasi_class"], p["pasi_class"], best["area_mm2"], p["area_mm2"], best.get("measured_share", float("nan"))))
     print("measured plaques: %d" % len(measured))
-    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d"
-          % (required, found, worst, pasi_ok))
+    centres = [np.array(p["centroid_left_m"]) for p in truth.get("plaques") or []]
+    extra = [q for q in measured if all(np.linalg.norm(np.array(q["centroid_m"]) - c) > 3e-3 for c in centres)]
+    print("extra plaques (no true plaque within 3 mm): %d%s" % (len(extra), "".join(
+        "\n  %.1f mm², mean %.3f mm, measured share %.2f, box %s" % (
+            q["area_mm2"], q["mean_height_mm"], q.get("measured_share", float("nan")), q.get("bbox_px")) for q in extra)))
+    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d, extra %d"
+          % (required, found, worst, pasi_ok, len(extra)))
 
 
 if __name__ == "__main__":

@@ -339,6 +339,7 @@ inline skin3d::IndurationReport toReportMsg(const induration::IndurationResult& 
     q.centroid.y = p.centroid.y();
     q.centroid.z = p.centroid.z();
     q.area = p.area;
+    q.top_height = p.top_height;
     q.mean_height = p.mean_height;
     q.max_height = p.max_height;
     q.std_height = p.std_height;

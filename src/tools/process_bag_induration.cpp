@@ -137,11 +137,11 @@ int runInduration(const IndurationRun& a) {
   if (!a.quiet) {
     std::printf("\n%zu frame(s), %d dropped. Last frame, heights above the healthy-skin reference (mm):\n",
                 records.size(), bad);
-    std::printf("| plaque | centroid x y z (mm, left optical) | area (mm²) | mean | max (p99) | std | PASI |\n"
-                "|---|---|---|---|---|---|---|\n");
+    std::printf("| plaque | centroid x y z (mm, left optical) | area (mm²) | top | mean | max (p99) | std | PASI |\n"
+                "|---|---|---|---|---|---|---|---|\n");
     for (const auto& p : last.plaques)
-      std::printf("| %d | %.1f %.1f %.1f | %.1f | %.3f | %.3f | %.3f | %d |\n", p.id, 1e3 * p.centroid.x(),
-                  1e3 * p.centroid.y(), 1e3 * p.centroid.z(), 1e6 * p.area, 1e3 * p.mean_height, 1e3 * p.max_height,
+      std::printf("| %d | %.1f %.1f %.1f | %.1f | %.3f | %.3f | %.3f | %.3f | %d |\n", p.id, 1e3 * p.centroid.x(),
+                  1e3 * p.centroid.y(), 1e3 * p.centroid.z(), 1e6 * p.area, 1e3 * p.top_height, 1e3 * p.mean_height, 1e3 * p.max_height,
                   1e3 * p.std_height, p.pasi_class);
     std::printf("results: %s (induration.yaml, height_map.png, surface.ply)\n", a.out.c_str());
   }

@@ -60,7 +60,7 @@ TEST(IndurationConfig, KeysAreUniqueAndCoverTheHeader) {
       "min_correlation", "weak_texture",
       "vertical",
       // IndurationOptions
-      "reference_model", "min_height", "min_area", "max_height", "max_incidence_deg", "smoothing_px", "max_smoothing_px", "edge_fraction", "exclusion_margin_px",
+      "reference_model", "min_height", "min_area", "max_height", "max_incidence_deg", "smoothing_px", "max_smoothing_px", "edge_fraction", "min_measured_share", "exclusion_margin_px",
       "interior_margin_px", "sor_std_ratio", "ransac_threshold", "fit_points", "max_iterations",
       "min_reference_fraction", "pasi_boundaries"};
   EXPECT_EQ(std::set<std::string>(promised.begin(), promised.end()), unique);

@@ -39,6 +39,7 @@ Plaque makePlaque(int id, Eigen::Vector3d centroid, double area_mm2, double mean
   p.centroid = centroid;
   p.area = area_mm2 * 1e-6;
   p.mean_height = mean_mm * 1e-3;
+  p.top_height = mean_mm * 1e-3;  // flat tops
   p.max_height = max_mm * 1e-3;
   p.std_height = std_mm * 1e-3;
   p.mean_height_sigma = 0.01e-3;
@@ -103,7 +104,7 @@ TEST(IndurationIo, YamlRoundTripWithRepeatability) {
   const YAML::Node o = y["options"];
   EXPECT_EQ(o["reference_model"].as<std::string>(), "auto");
   EXPECT_NEAR(o["min_height_mm"].as<double>(), 0.05, 1e-9);
-  EXPECT_NEAR(o["min_area_mm2"].as<double>(), 4.0, 1e-9);
+  EXPECT_NEAR(o["min_area_mm2"].as<double>(), 20.0, 1e-9);
   const std::vector<double> pasi = numbers(o["pasi_boundaries_mm"]);
   ASSERT_EQ(pasi.size(), 4u);
   for (int i = 0; i < 4; ++i) EXPECT_NEAR(pasi[i], 0.125 + 0.25 * i, 1e-9);
@@ -155,6 +156,7 @@ TEST(IndurationIo, YamlRoundTripWithRepeatability) {
   // Plaque 1: mean heights 0.40, 0.44 mm -> mean 0.42, sample std 0.04 / sqrt(2); max 0.60, 0.64; area 20, 24.
   EXPECT_NEAR(r1["mean_height_mm"]["mean"].as<double>(), 0.42, 1e-9);
   EXPECT_NEAR(r1["mean_height_mm"]["std"].as<double>(), 0.04 / std::sqrt(2.0), 1e-9);
+  EXPECT_NEAR(r1["top_height_mm"]["mean"].as<double>(), 0.42, 1e-9);
   EXPECT_NEAR(r1["max_height_mm"]["mean"].as<double>(), 0.62, 1e-9);
   EXPECT_NEAR(r1["max_height_mm"]["std"].as<double>(), 0.04 / std::sqrt(2.0), 1e-9);
   EXPECT_NEAR(r1["area_mm2"]["mean"].as<double>(), 22.0, 1e-7);

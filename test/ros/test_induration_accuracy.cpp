@@ -84,14 +84,14 @@ TEST(IndurationAccuracy, FullResolutionWorkpieceWithRealism) {
       ASSERT_GE(best, 0) << "frame " << f << ": the " << plateaus[i].height_mm << " mm plateau was not found";
       used[best] = true;
       const YAML::Node p = plaques[best];
-      const double h = p["mean_height_mm"].as<double>(), a = p["area_mm2"].as<double>();
+      const double h = p["top_height_mm"].as<double>(), a = p["area_mm2"].as<double>();
       heights[i].push_back(h);
       areas[i].push_back(a);
       worst_h = std::max(worst_h, std::fabs(h - plateaus[i].height_mm));
       worst_a = std::max(worst_a, std::fabs(a / plateaus[i].area_mm2 - 1));
-      std::printf("frame %zu plateau %.1f mm: measured %.4f mm (error %+.4f), area %.1f mm^2 (%+.1f %%), PASI %d, "
+      std::printf("frame %zu plateau %.1f mm: measured top %.4f mm (error %+.4f; interior mean %.4f), area %.1f mm^2 (%+.1f %%), PASI %d, "
                   "centroid off by %.2f mm\n",
-                  f, plateaus[i].height_mm, h, h - plateaus[i].height_mm, a, 100 * (a / plateaus[i].area_mm2 - 1),
+                  f, plateaus[i].height_mm, h, h - plateaus[i].height_mm, p["mean_height_mm"].as<double>(), a, 100 * (a / plateaus[i].area_mm2 - 1),
                   p["pasi_class"].as<int>(), 1e3 * best_d);
       EXPECT_NEAR(h, plateaus[i].height_mm, 0.02) << "frame " << f;
       EXPECT_EQ(p["pasi_class"].as<int>(), documentedPasiClass(plateaus[i].height_mm)) << "frame " << f;

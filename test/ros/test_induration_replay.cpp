@@ -195,11 +195,11 @@ TEST(IndurationReplay, ReportsMatchTheTruth) {
       EXPECT_EQ(std::count(used.begin(), used.end(), best), 0) << "plateau " << p.id
                                                                << " shares its nearest plaque with another";
       used.push_back(best);
-      std::printf("plateau %d: height %.3f mm, measured %.3f mm (max %.3f, PASI %d), centroid off by %.3f mm\n",
-                  p.id, h_true * 1e3, best->mean_height * 1e3, best->max_height * 1e3,
+      std::printf("plateau %d: height %.3f mm, measured top %.3f mm (interior mean %.3f, max %.3f, PASI %d), centroid off by %.3f mm\n",
+                  p.id, h_true * 1e3, best->top_height * 1e3, best->mean_height * 1e3, best->max_height * 1e3,
                   static_cast<int>(best->pasi_class), best_d * 1e3);
       EXPECT_LT(best_d, centroid_tol_mm * 1e-3) << "plateau " << p.id;
-      EXPECT_NEAR(best->mean_height, h_true, height_tol_mm * 1e-3) << "plateau " << p.id;
+      EXPECT_NEAR(best->top_height, h_true, height_tol_mm * 1e-3) << "plateau " << p.id;
       EXPECT_GT(best->area, 0.0);
     }
   }

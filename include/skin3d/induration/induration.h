@@ -17,19 +17,28 @@
  *     quadric and keeps the quadric only if it halves the robust scatter of the healthy skin's heights.
  *  3. Height map: signed distance above the reference (m), smoothed with a Gaussian of `smoothing_px`
  *     (NaN-aware) for segmentation only; statistics use the unsmoothed heights.
- *  4. Plaques: connected regions (8-connected) of the smoothed map above the detection threshold
- *     (`min_height`, or 3 robust sigma of the smoothed healthy-skin heights where the surface is noisier), at least `min_area`
- *     on the reference; each region's boundary is then re-drawn at `edge_fraction` of its own median height
- *     (a half-height boundary: the blur of the matching window moves it neither in nor out; where the
- *     matcher left the step edge unknown, the gap is bridged from both sides so the boundary falls in its
- *     middle), holes filled. Regions whose surroundings are less than 80 % known (the edge of the measured
- *     surface, islands of mismatches) or higher than `max_height` are ignored with a warning.
+ *  4. Plaques, searched within the working band: the pixels whose ray meets the reference where it faces both
+ *     cameras within `max_incidence_deg` (the reference's geometry, not the measured points'). Connected
+ *     regions (8-connected) of the smoothed map above the detection threshold (`min_height`, or 3 robust sigma
+ *     of the smoothed healthy-skin heights where the surface is noisier), at least `min_area` on the reference
+ *     (20 mm^2: a lesion under 5 mm across is a papule, not a plaque); each
+ *     region's boundary is then re-drawn at `edge_fraction` of its own median height (a half-height boundary:
+ *     the blur of the matching window moves it neither in nor out; where the matcher left the step edge
+ *     unknown, the gap is bridged from both sides so the boundary falls in its middle), holes filled; largest
+ *     cores first, the box around a core widened while the region reaches its border, and a core whose region
+ *     reaches a plaque drawn already is that plaque's shoulder (no valley separates them), not a plaque. Ignored,
+ *     with a warning: regions whose surroundings within the band are less than 80 % known (the edge of the
+ *     measured surface, islands of mismatches), with less than `min_measured_share` of their footprint
+ *     measured (scattered matches), or higher than `max_height`.
  *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
  *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
  *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by
  *     `interior_margin_px`: the matching window turns the edge into a ramp about a window wide) mean / std
- *     height, max height (the 99th percentile: one noisy pixel must not set it), and the PASImeter class of
- *     the mean height.
+ *     height, max height (the 99th percentile: one noisy pixel must not set it); the top height: the heights
+ *     binned by their distance from the outline, the bins' medians from 2 `interior_margin_px` in (half way to the
+ *     centre on a small plaque) fitted with
+ *     a + b (d_max - d)^2 and read at the deepest point (flat or domed tops; the mean of the interior still reads
+ *     a blurred ramp on a small, tall plaque), and the PASImeter class of the top height.
  *
  * PASImeter induration classes (thesis §1, app. B: five classes 0-4, 0.25 mm apart): class k is the card
  * step k * 0.25 mm that the plaque matches best, i.e. the boundaries are half-way between the steps:
@@ -63,7 +72,9 @@ struct IndurationOptions {
    *  "quadratic" (a height field quadratic over the plane: gently curved skin seen face-on). */
   std::string reference_model = "auto";
   double min_height = 0.05e-3;       //!< m: a point this far above the reference belongs to a plaque
-  double min_area = 4e-6;            //!< m^2: smaller regions are not plaques
+  /** m^2: smaller regions are not plaques. A lesion under 5 mm across (a 20 mm^2 disc) is a papule in
+   *  dermatology, not a plaque; on noisy skin the matcher's noise makes raised blobs of 4-20 mm^2. */
+  double min_area = 20e-6;
   double max_height = 5e-3;          //!< m: higher regions are not skin plaques (ignored with a warning)
   /** deg: plaques are searched only where the reference surface faces both cameras within this angle (the
    *  working band; beyond it one view is too foreshortened to measure reliably). 90 = everywhere. */
@@ -73,6 +84,9 @@ struct IndurationOptions {
    *  healthy heights are below 1.5 min_height, up to this (noisy skin needs more than a speckle plate). */
   double max_smoothing_px = 24.0;
   double edge_fraction = 0.5;        //!< plaque boundary at this fraction of its median height
+  /** A raised region is a plaque only if at least this share of its footprint has a height; sparser ones (where
+   *  the matcher answered for a few scattered pixels, mostly at the working band's edge) are listed in a warning. */
+  double min_measured_share = 0.5;
   int exclusion_margin_px = 5;       //!< plaque mask dilation when fitting the reference
   int interior_margin_px = 8;        //!< heights are measured this far inside the plaque boundary (matching-window ramp)
   double sor_std_ratio = 3.0;        //!< statistical outlier removal threshold (std of neighbour distances)
@@ -115,7 +129,10 @@ struct Plaque {
   int id = 0;                  //!< 1, 2, ... in order of decreasing area
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  //!< m, frame of the cloud
   double area = 0;             //!< m^2 on the reference
-  double mean_height = 0, max_height = 0, std_height = 0;  //!< m
+  /** m: the top's height, the level the height profile reaches at the plaque's centre (flat or domed top; see the
+   *  file comment); the PASImeter class is this height's, as the card is matched to a plaque's elevation. */
+  double top_height = 0;
+  double mean_height = 0, max_height = 0, std_height = 0;  //!< m, over the interior
   double mean_height_sigma = 0;  //!< m, standard error of the mean height (from the per-point sigmas)
   int pasi_class = 0;
   int pixels = 0;

@@ -28,6 +28,8 @@ void IndurationOptions::validate() const {
   if (!(max_smoothing_px >= smoothing_px) || max_smoothing_px > 100)
     throw IndurationError("max_smoothing_px " + num(max_smoothing_px) + " must be smoothing_px ... 100");
   if (!(edge_fraction > 0 && edge_fraction < 1)) throw IndurationError("edge_fraction " + num(edge_fraction) + " must be in (0, 1)");
+  if (!(min_measured_share >= 0 && min_measured_share <= 1))
+    throw IndurationError("min_measured_share " + num(min_measured_share) + " must be 0 ... 1");
   if (exclusion_margin_px < 0 || exclusion_margin_px > 200)
     throw IndurationError("exclusion_margin_px " + std::to_string(exclusion_margin_px) + " must be 0 ... 200");
   if (!(sor_std_ratio > 0)) throw IndurationError("sor_std_ratio " + num(sor_std_ratio) + " must be > 0");
@@ -427,38 +429,133 @@ double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, dou
 }
 
 /**
- * The working band: known pixels where the reference surface's normal makes at most `max_deg` with the rays to
- * both cameras (the left at the origin, the right at `right_centre`; only the left if that is unknown).
+ * Where the ray of a pixel (unit `r`, from the left camera at the origin) first meets the reference: the
+ * distance along it, NaN if it misses. Along a ray every model is a quadratic in the distance (the plane and the
+ * quadratic height field in their heights, the implicit quadric in F), so three samples give it exactly.
+ */
+double rayHit(const ReferenceSurface& ref, const Eigen::Vector3d& r) {
+  const bool quadric = ref.model == "quadric";
+  const double T = std::max(1e-3, quadric ? ref.q_centre.norm() : ref.origin.norm() + std::fabs(ref.d));
+  auto g = [&](double t) {
+    const Eigen::Vector3d x = t * T * r;
+    return quadric ? monomials((x - ref.q_centre) / ref.q_scale).dot(ref.coefficients) : ref.height(x);
+  };
+  const double f0 = g(0), f1 = g(1), f2 = g(2);
+  const double a = 0.5 * (f2 - 2 * f1 + f0), b = f1 - f0 - a, c = f0;
+  double u = std::numeric_limits<double>::quiet_NaN();
+  if (std::fabs(a) < 1e-12 * (std::fabs(b) + std::fabs(c))) {
+    if (b != 0 && -c / b > 0) u = -c / b;
+  } else {
+    const double disc = b * b - 4 * a * c;
+    if (disc < 0) return std::numeric_limits<double>::quiet_NaN();
+    const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+    const double u1 = q / a, u2 = q != 0 ? c / q : std::numeric_limits<double>::quiet_NaN();
+    for (double v : {u1, u2})
+      if (v > 0 && !(v >= u)) u = v;  // the nearest root in front of the camera
+  }
+  return u * T;
+}
+
+/**
+ * The height of a plaque's top (m): the level its height profile reaches at the centre. The heights are binned by
+ * their distance from the outline (px, distance transform of `mask`); from twice `margin` px in (clear of the
+ * ramp and of the matcher's blur of it, which reaches 8-12 px in at full resolution: a profile of 0.5-1.4 mm
+ * plaques reads 10-60 um low 8 px in, right from 12 px in), or from half way to the centre on a small plaque
+ * (but at least `margin` px in), the bins' medians are fitted, weighted
+ * by the bins' counts, with a + b (d_max - d)^2: a paraboloid, a domed top, read at the deepest point (a). The
+ * dome is kept only if the centre is higher and the curvature significant (-b over its standard error, from the
+ * fit's own residuals, above 3); otherwise the top is flat (or dished: its highest level is not at the centre)
+ * and its height is the weighted mean of the bins (less noisy than extrapolating).
+ * NaN if fewer than 30 heights are that deep.
+ */
+double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin) {
+  cv::Mat dist;
+  cv::distanceTransform(mask, dist, cv::DIST_L2, cv::DIST_MASK_5);
+  double dmax = 0;
+  cv::minMaxLoc(dist, nullptr, &dmax);
+  const double d0 = std::max(static_cast<double>(margin), std::min(2.0 * margin, 0.5 * dmax));
+  std::vector<std::vector<float>> bins(static_cast<std::size_t>(dmax) + 1);
+  int n = 0;
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x) {
+      const float d = dist.at<float>(y, x), v = h.at<float>(y, x);
+      if (mask.at<uchar>(y, x) && d >= d0 && !std::isnan(v)) {
+        bins[static_cast<std::size_t>(d)].push_back(v);
+        ++n;
+      }
+    }
+  if (n < 30) return std::numeric_limits<double>::quiet_NaN();
+  std::vector<Eigen::Vector3d> pts;  // (x, median, weight)
+  Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+  double sw = 0, swm = 0;
+  for (std::size_t k = 0; k < bins.size(); ++k) {
+    auto& b = bins[k];
+    if (b.size() < 3) continue;
+    std::nth_element(b.begin(), b.begin() + b.size() / 2, b.end());
+    const double x = (dmax - (k + 0.5)) * (dmax - (k + 0.5)), w = static_cast<double>(b.size()), m = b[b.size() / 2];
+    pts.emplace_back(x, m, w);
+    const Eigen::Vector2d row(1.0, x);
+    A += w * row * row.transpose();
+    rhs += w * row * m;
+    sw += w;
+    swm += w * m;
+  }
+  if (!(sw > 0)) return std::numeric_limits<double>::quiet_NaN();
+  const double flat = swm / sw;
+  if (pts.size() < 5 || !(std::fabs(A.determinant()) > 1e-12 * A.squaredNorm())) return flat;
+  const Eigen::Vector2d ab = A.ldlt().solve(rhs);
+  double ssr = 0;
+  for (const auto& p : pts) ssr += p(2) * std::pow(p(1) - ab(0) - ab(1) * p(0), 2);
+  const double var_b = ssr / (pts.size() - 2) * A.inverse()(1, 1);
+  return var_b > 0 && ab(1) < -3 * std::sqrt(var_b) ? ab(0) : flat;
+}
+
+/**
+ * Incidence of the reference surface (deg, CV_32F): for every pixel whose ray meets the reference, the larger of
+ * the angles its normal makes with the rays to the two cameras (the left at the origin, the right at
+ * `right_centre`; only the left if that is unknown); 180 where it faces away from the right camera, NaN where the
+ * ray misses. It is the reference's geometry, not the measured points': a mismatched point beyond a limb's
+ * silhouette has none, and a pixel the matcher left unknown has one if the skin there faces the rig.
  * Evaluated every 4 px (the reference is smooth) and spread to the pixels between.
  */
-cv::Mat workingBand(const cv::Mat& xyz, const cv::Mat& known_mask, const ReferenceSurface& ref, const cv::Vec3d& right_centre,
-                    double max_deg) {
-  if (max_deg >= 90) return known_mask.clone();
+cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre) {
   constexpr int kStep = 4;
-  const double cmax = std::cos(max_deg * M_PI / 180.0);
   const bool have_right = std::isfinite(right_centre[0]);
   const Eigen::Vector3d rc(right_centre[0], right_centre[1], right_centre[2]);
-  const cv::Size small((xyz.cols + kStep - 1) / kStep, (xyz.rows + kStep - 1) / kStep);
-  cv::Mat ok(small, CV_8U, cv::Scalar(0));
+  const cv::Size small((ray.cols + kStep - 1) / kStep, (ray.rows + kStep - 1) / kStep);
+  cv::Mat inc(small, CV_32F, cv::Scalar(kNaN));
   cv::parallel_for_(cv::Range(0, small.height), [&](const cv::Range& rows) {
     for (int sy = rows.start; sy < rows.end; ++sy)
       for (int sx = 0; sx < small.width; ++sx) {
-        // the first known pixel of the cell
-        const cv::Vec3f* p = nullptr;
-        for (int y = sy * kStep; y < std::min(xyz.rows, (sy + 1) * kStep) && !p; ++y)
-          for (int x = sx * kStep; x < std::min(xyz.cols, (sx + 1) * kStep) && !p; ++x)
-            if (known_mask.at<uchar>(y, x)) p = &xyz.at<cv::Vec3f>(y, x);
-        if (!p) continue;
-        const Eigen::Vector3d X((*p)[0], (*p)[1], (*p)[2]);
-        const Eigen::Vector3d n = ref.tangentPlane(X).head<3>();
-        const double cl = std::fabs(n.dot(-X.normalized()));
-        const double cr = have_right ? std::fabs(n.dot((rc - X).normalized())) : 1.0;
-        if (cl >= cmax && cr >= cmax) ok.at<uchar>(sy, sx) = 255;
+        const cv::Vec3f& rv = ray.at<cv::Vec3f>(std::min(ray.rows - 1, sy * kStep + kStep / 2), std::min(ray.cols - 1, sx * kStep + kStep / 2));
+        const Eigen::Vector3d r = Eigen::Vector3d(rv[0], rv[1], rv[2]).normalized();
+        const double t = rayHit(ref, r);
+        if (!(t > 0)) continue;
+        const Eigen::Vector3d X = t * r;
+        Eigen::Vector3d n;
+        if (ref.model == "quadric") {
+          n = monomialGradients((X - ref.q_centre) / ref.q_scale).transpose() * ref.coefficients;
+          if (!(n.norm() > 0)) continue;
+          n.normalize();
+        } else {
+          n = ref.tangentPlane(X).head<3>();
+        }
+        if (n.dot(r) > 0) n = -n;  // towards the left camera, which sees the first hit
+        const double cl = n.dot(-r);
+        const double cr = have_right ? n.dot((rc - X).normalized()) : 1.0;
+        inc.at<float>(sy, sx) = cr <= 0 ? 180.0f : static_cast<float>(std::acos(std::min(1.0, std::min(cl, cr))) * 180.0 / M_PI);
       }
   });
-  cv::Mat band;
-  cv::resize(ok, band, xyz.size(), 0, 0, cv::INTER_NEAREST);
-  return band & known_mask;
+  cv::Mat out;
+  cv::resize(inc, out, ray.size(), 0, 0, cv::INTER_NEAREST);
+  return out;
+}
+
+/** The working band: pixels whose reference incidence (incidenceMap) is at most `max_deg`. */
+cv::Mat workingBand(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre, double max_deg) {
+  if (max_deg >= 90) return cv::Mat(ray.size(), CV_8U, cv::Scalar(255));
+  return incidenceMap(ray, ref, right_centre) <= max_deg;  // NaN compares false
 }
 
 /** Detection threshold: min_height, or 3 robust sigma of the smoothed healthy heights if that is larger
@@ -477,6 +574,7 @@ double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_heig
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return std::max(min_height, 3.0 * 1.4826 * v[v.size() / 2]);
 }
+
 
 /** The connected regions (8-connected) of `mask` whose footprint on the reference is at least min_area / 4. */
 cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area) {
@@ -611,11 +709,11 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       return model == "quadric" ? fitQuadric(xyz, use, o.fit_points, scale, &a.ref)
                                 : fitReference(xyz, use, model, o.fit_points, scale, &a.ref);
     };
-    a.band = known_mask;
+    a.band = known_mask.clone();  // its own data: assigning an expression to a.band below writes into it
     for (int it = 0; it < o.max_iterations; ++it) {
       // from the second pass on, the reference is fitted within the working band of the first fit: the sides
       // of a limb, seen very obliquely by one camera, are measured worst and would pull it
-      if (it == 1) a.band = workingBand(xyz, known_mask, a.ref, cloud.right_centre, o.max_incidence_deg);
+      if (it == 1) a.band = workingBand(cloud.ray, a.ref, cloud.right_centre, o.max_incidence_deg) & known_mask;
       cv::Mat use = a.band & ~a.plaque_mask;
       a.healthy_fraction = cv::countNonZero(use) / static_cast<double>(res.known_points);
       if (a.healthy_fraction < o.min_reference_fraction) return a;
@@ -693,7 +791,9 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   hs = smoothFilled(res.height_map, best.smoothing, o.interior_margin_px);
 
   // ---- the working band: where the reference faces both cameras within max_incidence_deg
-  const cv::Mat band = workingBand(xyz, known_mask, ref, cloud.right_centre, o.max_incidence_deg);
+  const cv::Mat inc = incidenceMap(cloud.ray, ref, cloud.right_centre);
+  const cv::Mat reach = o.max_incidence_deg >= 90 ? cv::Mat(inc.size(), CV_8U, cv::Scalar(255)) : (inc <= o.max_incidence_deg);
+  const cv::Mat band = reach & known_mask;
   res.band_fraction = res.known_points > 0 ? cv::countNonZero(band & known_mask) / static_cast<double>(res.known_points) : 1.0;
   if (res.band_fraction < 0.995)
     res.warnings.push_back(num(std::round(1000 * (1 - res.band_fraction)) / 10) + " % of the measured surface faces a camera at more than " +
@@ -716,10 +816,27 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   const int n = cv::connectedComponentsWithStats(above, lab, stats, cents, 8, CV_32S);
   std::vector<Plaque> plaques;
   std::vector<std::pair<double, std::string>> at_edge;  // ignored regions at the edge: area, description
+  std::vector<std::pair<double, std::string>> sparse;   // ignored regions with too few heights: area, description
   cv::Mat final_labels(xyz.size(), CV_32S, cv::Scalar(0));
-  for (int k = 1; k < n; ++k) {
+  // Largest cores first: a plaque whose core the matcher cut in two (an occlusion shadow across it) is drawn
+  // from its larger piece, and the smaller piece, already inside it, is skipped.
+  std::vector<int> cores(std::max(0, n - 1));
+  std::iota(cores.begin(), cores.end(), 1);
+  std::stable_sort(cores.begin(), cores.end(),
+                   [&](int a, int b) { return stats.at<int>(a, cv::CC_STAT_AREA) > stats.at<int>(b, cv::CC_STAT_AREA); });
+  for (const int k : cores) {
     const cv::Rect bb(stats.at<int>(k, cv::CC_STAT_LEFT), stats.at<int>(k, cv::CC_STAT_TOP), stats.at<int>(k, cv::CC_STAT_WIDTH),
                       stats.at<int>(k, cv::CC_STAT_HEIGHT));
+    {
+      int in_core = 0, taken = 0;
+      for (int y = bb.y; y < bb.y + bb.height; ++y)
+        for (int x = bb.x; x < bb.x + bb.width; ++x)
+          if (lab.at<int>(y, x) == k) {
+            ++in_core;
+            taken += final_labels.at<int>(y, x) != 0;
+          }
+      if (2 * taken >= in_core) continue;  // part of a plaque drawn already
+    }
     // median height of the core region
     std::vector<float> hv;
     for (int y = bb.y; y < bb.y + bb.height; ++y)
@@ -729,25 +846,35 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     std::nth_element(hv.begin(), hv.begin() + hv.size() / 2, hv.end());
     const double median = hv[hv.size() / 2];
     const double edge = std::max(threshold, o.edge_fraction * median);
-    // region at the edge threshold connected to the core, within a margin around the core's box
-    const int m = 4 * std::max(1, static_cast<int>(std::ceil(best.smoothing))) + 2 * o.exclusion_margin_px + 2;
-    const cv::Rect box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
-    cv::Mat region = hs(box) > edge;
-    if (o.interior_margin_px > 0) {
-      cv::morphologyEx(region, region, cv::MORPH_CLOSE, join);
-      region.setTo(0, off_band(box));
+    // region at the edge threshold connected to the core, within a margin around the core's box; the margin
+    // doubles (up to 3 times) while the region reaches the box's border inside the image: the part of a plaque
+    // beyond its core's box (past a gap the core could not cross) must not be cut off along a straight line
+    int m = 4 * std::max(1, static_cast<int>(std::ceil(best.smoothing))) + 2 * o.exclusion_margin_px + 2;
+    cv::Rect box;
+    cv::Mat mask;
+    for (int grow = 0;; ++grow, m *= 2) {
+      box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
+      cv::Mat region = hs(box) > edge;
+      if (o.interior_margin_px > 0) {
+        cv::morphologyEx(region, region, cv::MORPH_CLOSE, join);
+        region.setTo(0, off_band(box));
+      }
+      cv::Mat rl;
+      const int rn = cv::connectedComponents(region, rl, 8, CV_32S);
+      std::vector<char> keep(rn, 0);
+      for (int y = bb.y; y < bb.y + bb.height; ++y)
+        for (int x = bb.x; x < bb.x + bb.width; ++x)
+          if (lab.at<int>(y, x) == k) keep[rl.at<int>(y - box.y, x - box.x)] = 1;
+      keep[0] = 0;
+      mask = cv::Mat::zeros(box.size(), CV_8U);
+      for (int y = 0; y < box.height; ++y)
+        for (int x = 0; x < box.width; ++x)
+          if (keep[rl.at<int>(y, x)]) mask.at<uchar>(y, x) = 255;
+      const bool touches = (box.x > 0 && cv::countNonZero(mask.col(0)) > 0) || (box.y > 0 && cv::countNonZero(mask.row(0)) > 0) ||
+                           (box.x + box.width < xyz.cols && cv::countNonZero(mask.col(box.width - 1)) > 0) ||
+                           (box.y + box.height < xyz.rows && cv::countNonZero(mask.row(box.height - 1)) > 0);
+      if (!touches || grow == 3) break;
     }
-    cv::Mat rl;
-    const int rn = cv::connectedComponents(region, rl, 8, CV_32S);
-    std::vector<char> keep(rn, 0);
-    for (int y = bb.y; y < bb.y + bb.height; ++y)
-      for (int x = bb.x; x < bb.x + bb.width; ++x)
-        if (lab.at<int>(y, x) == k) keep[rl.at<int>(y - box.y, x - box.x)] = 1;
-    keep[0] = 0;
-    cv::Mat mask = cv::Mat::zeros(box.size(), CV_8U);
-    for (int y = 0; y < box.height; ++y)
-      for (int x = 0; x < box.width; ++x)
-        if (keep[rl.at<int>(y, x)]) mask.at<uchar>(y, x) = 255;
     // fill holes: background not reachable from the box border
     cv::Mat flood;
     cv::copyMakeBorder(mask, flood, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
@@ -755,6 +882,16 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
         if (flood.at<uchar>(y + 1, x + 1) == 0) mask.at<uchar>(y, x) = 255;
+    {
+      // A core whose half-height region reaches a plaque drawn already (from a larger core) is that plaque's
+      // shoulder (its ramp, a step the matcher blurred, a piece past a gap): no valley below its half height
+      // separates them, so it is not a plaque of its own.
+      int overlap = 0;
+      for (int y = 0; y < box.height && overlap < 10; ++y)
+        for (int x = 0; x < box.width; ++x)
+          if (mask.at<uchar>(y, x) && final_labels.at<int>(y + box.y, x + box.x) != 0) ++overlap;
+      if (overlap >= 10) continue;
+    }
     // statistics: area and centroid over the whole plaque; heights over its interior (the plaque eroded by
     // interior_margin_px: the matching window blurs the edge into a ramp, which would pull the mean down)
     // footprints on the reference's tangent plane at the region (the plane itself for the plane model)
@@ -779,7 +916,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     const cv::Mat A = footprint(cloud.ray, local, box);
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
-        if (final_labels.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // already in a larger neighbour
+        if (final_labels.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // a few pixels of a neighbour
     cv::Mat interior;
     if (o.interior_margin_px > 0) {
       cv::erode(mask, interior, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o.interior_margin_px + 1, 2 * o.interior_margin_px + 1)),
@@ -821,16 +958,22 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       // island of mismatches): its height above the reference means nothing
       const int r1 = 2 * o.interior_margin_px, r2 = 4 * o.interior_margin_px;
       // (in a frame padded by r2: beyond the image border counts as unknown)
-      cv::Mat full = cv::Mat::zeros(xyz.rows + 2 * r2, xyz.cols + 2 * r2, CV_8U), d1, d2, known_pad;
+      // Only the surroundings in the working band count (where the reference says the skin faces both
+      // cameras): a plaque next to the band's edge keeps its measurable side; an island beyond a silhouette,
+      // where no ray meets the reference in the band, has none.
+      cv::Mat full = cv::Mat::zeros(xyz.rows + 2 * r2, xyz.cols + 2 * r2, CV_8U), d1, d2, known_pad, reach_pad;
       full(box + cv::Point(r2, r2)).setTo(255, mask);
       cv::copyMakeBorder(known_mask, known_pad, r2, r2, r2, r2, cv::BORDER_CONSTANT, 0);
+      cv::copyMakeBorder(reach, reach_pad, r2, r2, r2, r2, cv::BORDER_CONSTANT, 255);  // beyond the image: unknown
       cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
       cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));
-      const cv::Mat ring = d2 & ~d1;
+      const cv::Mat ring = d2 & ~d1 & reach_pad;
+      const int ring_all = cv::countNonZero(d2 & ~d1);
       const int ring_n = cv::countNonZero(ring), ring_known = cv::countNonZero(ring & known_pad);
       const double mean_h = sh / static_cast<double>(hk.size());
-      if (ring_n == 0 || ring_known < 0.8 * ring_n) {
-        at_edge.emplace_back(area, num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
+      if (ring_n < 0.25 * ring_all || ring_known < 0.8 * ring_n) {
+        // (in pixels: beyond a silhouette the reference's tangent plane is edge-on and an area means nothing)
+        at_edge.emplace_back(px, std::to_string(px) + " px at pixel (" +
                                        std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
                                        "), " + num(std::round(100.0 * ring_known / std::max(1, ring_n))) +
                                        " % of its surroundings known");
@@ -843,6 +986,11 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
         continue;
       }
     }
+    if (nc < o.min_measured_share * px) {
+      sparse.emplace_back(px, std::to_string(px) + " px at pixel (" + std::to_string(box.x + box.width / 2) + ", " +
+                                    std::to_string(box.y + box.height / 2) + "), " + num(std::round(100.0 * nc / std::max(1, px))) + " % measured");
+      continue;
+    }
     const double nk = static_cast<double>(hk.size());
     p.area = area;
     p.centroid = c / std::max(1, nc);
@@ -851,7 +999,11 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     std::nth_element(hk.begin(), hk.begin() + static_cast<long>(0.99 * (nk - 1)), hk.end());
     p.max_height = hk[static_cast<std::size_t>(0.99 * (nk - 1))];
     p.mean_height_sigma = std::sqrt(ssig2) / nk;
-    p.pasi_class = pasiClass(p.mean_height, o.pasi_boundaries);
+    // the top: from the height profile; a plaque too small to have an inner half clear of its ramp takes the
+    // 99th percentile of its interior (the mean would read its blurred ramp)
+    p.top_height = topHeight(mask, res.height_map(box), o.interior_margin_px);
+    if (!std::isfinite(p.top_height)) p.top_height = p.max_height;
+    p.pasi_class = pasiClass(p.top_height, o.pasi_boundaries);
     p.pixels = px;
     p.measured_fraction = px > 0 ? nc / static_cast<double>(px) : 0.0;
     p.volume = p.measured_fraction > 0 ? vol / p.measured_fraction : 0.0;
@@ -893,6 +1045,15 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                                ? "a raised region of " + list + " was ignored: it lies at the edge of the measured surface"
                                : std::to_string(at_edge.size()) + " raised regions were ignored: they lie at the edge of the "
                                  "measured surface (their height above the reference means nothing); the largest: " + list);
+  }
+  if (!sparse.empty()) {
+    std::sort(sparse.begin(), sparse.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    std::string list;
+    for (size_t i = 0; i < std::min<size_t>(3, sparse.size()); ++i) list += (i ? "; " : "") + sparse[i].second;
+    res.warnings.push_back(std::to_string(sparse.size()) + " raised region" + (sparse.size() == 1 ? " was" : "s were") +
+                           " ignored: under " + num(std::round(100 * o.min_measured_share)) +
+                           " % of the footprint has a height (scattered matches, mostly where the skin turns away from "
+                           "the rig, are not a plaque); the largest: " + list);
   }
   if (res.plaques.empty()) res.warnings.push_back("no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference");
   return res;

@@ -152,6 +152,7 @@ const std::vector<std::pair<std::string, Field>>& table() {
       SKIN3D_DOUBLE("smoothing_px", induration.smoothing_px),
       SKIN3D_DOUBLE("max_smoothing_px", induration.max_smoothing_px),
       SKIN3D_DOUBLE("edge_fraction", induration.edge_fraction),
+      SKIN3D_DOUBLE("min_measured_share", induration.min_measured_share),
       SKIN3D_INT("exclusion_margin_px", induration.exclusion_margin_px),
       SKIN3D_INT("interior_margin_px", induration.interior_margin_px),
       SKIN3D_DOUBLE("sor_std_ratio", induration.sor_std_ratio),

@@ -72,6 +72,7 @@ void emitOptions(YAML::Emitter& y, const IndurationOptions& o) {
   y << YAML::Key << "smoothing_px" << YAML::Value << o.smoothing_px;
   y << YAML::Key << "max_smoothing_px" << YAML::Value << o.max_smoothing_px;
   y << YAML::Key << "edge_fraction" << YAML::Value << o.edge_fraction;
+  y << YAML::Key << "min_measured_share" << YAML::Value << o.min_measured_share;
   y << YAML::Key << "exclusion_margin_px" << YAML::Value << o.exclusion_margin_px;
   y << YAML::Key << "interior_margin_px" << YAML::Value << o.interior_margin_px;
   y << YAML::Key << "sor_std_ratio" << YAML::Value << o.sor_std_ratio;
@@ -132,6 +133,7 @@ void emitPlaque(YAML::Emitter& y, const Plaque& p) {
   y << YAML::Key << "centroid_m" << YAML::Value;
   emitVector(y, p.centroid);
   y << YAML::Key << "area_mm2" << YAML::Value << kMm2 * p.area;
+  y << YAML::Key << "top_height_mm" << YAML::Value << kMm * p.top_height;
   y << YAML::Key << "mean_height_mm" << YAML::Value << kMm * p.mean_height;
   y << YAML::Key << "max_height_mm" << YAML::Value << kMm * p.max_height;
   y << YAML::Key << "std_height_mm" << YAML::Value << kMm * p.std_height;
@@ -182,7 +184,7 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
     matches.push_back(f == 0 ? identity : matchPlaques(base, frames[f].result.plaques));
   }
   for (size_t i = 0; i < base.size(); ++i) {
-    std::vector<double> mean, max, stdh, area, sigma;
+    std::vector<double> top, mean, max, stdh, area, sigma;
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     y << YAML::BeginMap;
     y << YAML::Key << "id" << YAML::Value << base[i].id;
@@ -195,6 +197,7 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
       }
       const Plaque& p = frames[f].result.plaques[j];
       y << p.id;
+      top.push_back(p.top_height);
       mean.push_back(p.mean_height);
       max.push_back(p.max_height);
       stdh.push_back(p.std_height);
@@ -206,12 +209,13 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
     y << YAML::Key << "frames_found" << YAML::Value << mean.size();
     y << YAML::Key << "centroid_m" << YAML::Value;
     emitVector(y, centroid / static_cast<double>(mean.size()));  // frame 0 always matches itself: size >= 1
+    emitMeanStd(y, "top_height_mm", top, kMm);
     emitMeanStd(y, "mean_height_mm", mean, kMm);
     emitMeanStd(y, "max_height_mm", max, kMm);
     emitMeanStd(y, "std_height_mm", stdh, kMm);
     emitMeanStd(y, "area_mm2", area, kMm2);
     emitMeanStd(y, "mean_height_sigma_mm", sigma, kMm);
-    y << YAML::Key << "pasi_class_of_mean" << YAML::Value << pasiClass(meanStd(mean).first, options.pasi_boundaries);
+    y << YAML::Key << "pasi_class_of_mean" << YAML::Value << pasiClass(meanStd(top).first, options.pasi_boundaries);
     y << YAML::EndMap;
   }
   y << YAML::EndSeq << YAML::EndMap;
@@ -487,7 +491,7 @@ cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const s
     }
     if (box.empty()) continue;
     char text[64];
-    std::snprintf(text, sizeof(text), "%d: %.2f mm", p.id, kMm * p.mean_height);
+    std::snprintf(text, sizeof(text), "%d: %.2f mm", p.id, kMm * p.top_height);
     int baseline = 0;
     const cv::Size ts = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, font, 1, &baseline);
     cv::Point at = toCanvas(cv::Point2d(box.x, box.y));

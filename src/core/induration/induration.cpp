@@ -794,7 +794,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   const cv::Mat inc = incidenceMap(cloud.ray, ref, cloud.right_centre);
   const cv::Mat reach = o.max_incidence_deg >= 90 ? cv::Mat(inc.size(), CV_8U, cv::Scalar(255)) : (inc <= o.max_incidence_deg);
   const cv::Mat band = reach & known_mask;
-  res.band_fraction = res.known_points > 0 ? cv::countNonZero(band & known_mask) / static_cast<double>(res.known_points) : 1.0;
+  res.band_fraction = res.known_points > 0 ? cv::countNonZero(band) / static_cast<double>(res.known_points) : 1.0;
   if (res.band_fraction < 0.995)
     res.warnings.push_back(num(std::round(1000 * (1 - res.band_fraction)) / 10) + " % of the measured surface faces a camera at more than " +
                            num(o.max_incidence_deg) + " deg (the sides of a limb): not searched for plaques; turn the skin "
@@ -957,14 +957,17 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       // a region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an
       // island of mismatches): its height above the reference means nothing
       const int r1 = 2 * o.interior_margin_px, r2 = 4 * o.interior_margin_px;
-      // (in a frame padded by r2: beyond the image border counts as unknown)
       // Only the surroundings in the working band count (where the reference says the skin faces both
       // cameras): a plaque next to the band's edge keeps its measurable side; an island beyond a silhouette,
-      // where no ray meets the reference in the band, has none.
-      cv::Mat full = cv::Mat::zeros(xyz.rows + 2 * r2, xyz.cols + 2 * r2, CV_8U), d1, d2, known_pad, reach_pad;
-      full(box + cv::Point(r2, r2)).setTo(255, mask);
-      cv::copyMakeBorder(known_mask, known_pad, r2, r2, r2, r2, cv::BORDER_CONSTANT, 0);
-      cv::copyMakeBorder(reach, reach_pad, r2, r2, r2, r2, cv::BORDER_CONSTANT, 255);  // beyond the image: unknown
+      // where no ray meets the reference in the band, has none. Computed in a window of the box grown by r2
+      // (the ring cannot reach further); beyond the image border counts as in the band and unknown.
+      const cv::Rect win(box.x - r2, box.y - r2, box.width + 2 * r2, box.height + 2 * r2);
+      const cv::Rect in = win & cv::Rect(0, 0, xyz.cols, xyz.rows);
+      cv::Mat full = cv::Mat::zeros(win.size(), CV_8U), d1, d2;
+      cv::Mat known_pad = cv::Mat::zeros(win.size(), CV_8U), reach_pad(win.size(), CV_8U, cv::Scalar(255));
+      full(cv::Rect(r2, r2, box.width, box.height)).setTo(255, mask);
+      known_mask(in).copyTo(known_pad(in - win.tl()));
+      reach(in).copyTo(reach_pad(in - win.tl()));
       cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
       cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));
       const cv::Mat ring = d2 & ~d1 & reach_pad;
@@ -999,8 +1002,8 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     std::nth_element(hk.begin(), hk.begin() + static_cast<long>(0.99 * (nk - 1)), hk.end());
     p.max_height = hk[static_cast<std::size_t>(0.99 * (nk - 1))];
     p.mean_height_sigma = std::sqrt(ssig2) / nk;
-    // the top: from the height profile; a plaque too small to have an inner half clear of its ramp takes the
-    // 99th percentile of its interior (the mean would read its blurred ramp)
+    // the top: from the height profile; a plaque too small to have 30 heights clear of its ramp takes the 99th
+    // percentile of its interior (the mean would read its blurred ramp)
     p.top_height = topHeight(mask, res.height_map(box), o.interior_margin_px);
     if (!std::isfinite(p.top_height)) p.top_height = p.max_height;
     p.pasi_class = pasiClass(p.top_height, o.pasi_boundaries);

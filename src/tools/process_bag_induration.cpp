@@ -61,7 +61,7 @@ int runInduration(const IndurationRun& a) {
   StereoPairs pairs_in;
   std::vector<induration::FrameRecord> records;
   stereo::DenseCloud last_cloud;
-  cv::Mat last_left, last_disparity, last_sigma;
+  cv::Mat last_left, last_disparity, last_sigma, last_unknown;
   int bad = 0;
   std::filesystem::create_directories(a.out);
 
@@ -88,6 +88,7 @@ int runInduration(const IndurationRun& a) {
                   "(sgbm %.1f s, refine %.1f s)\n",
                   records.size() + 1, expected, rec.stamp, 100 * map.valid_fraction, rec.result.reference.rms * 1e3,
                   rec.result.plaques.size(), rec.seconds, map.timing.sgbm, map.timing.refine);
+      std::printf("  %s\n", stereo::describeUnknown(map).c_str());
       for (const auto& w : rec.result.warnings) std::printf("  warning: %s\n", w.c_str());
       std::fflush(stdout);
     }
@@ -96,6 +97,7 @@ int runInduration(const IndurationRun& a) {
     last_left = L;
     last_disparity = map.disparity;
     last_sigma = map.sigma;
+    last_unknown = stereo::unknownReasonImage(map, L);
   };
 
   int pairs = 0;
@@ -132,6 +134,8 @@ int runInduration(const IndurationRun& a) {
   if (!cv::imwrite(a.out + "/disparity.tiff", last_disparity) || !cv::imwrite(a.out + "/disparity_sigma.tiff", last_sigma) ||
       !cv::imwrite(a.out + "/left_rect.png", last_left))
     throw std::runtime_error("cannot write the disparity images to " + a.out);
+  if (!last_unknown.empty() && !cv::imwrite(a.out + "/unknown_reason.png", last_unknown))
+    throw std::runtime_error("cannot write " + a.out + "/unknown_reason.png");
   if (!last.height_map.empty() && !cv::imwrite(a.out + "/height_map.tiff", last.height_map))
     throw std::runtime_error("cannot write " + a.out + "/height_map.tiff");
   if (!a.quiet) {

@@ -18,7 +18,12 @@
  *     is followed exactly and there is no pixel locking (no 1/16-px quantisation, no parabola bias).
  *     A pixel whose fit moves more than `refine_max_shift` (semi-global level) px from the semi-global
  *     value, or whose window has too little texture (`min_texture`), too large a sigma (`max_sigma`) or a
- *     normalised correlation below `min_correlation` (the images do not look alike there), becomes unknown.
+ *     normalised correlation of the low-passed pair below `min_correlation` (the images do not look alike
+ *     there), becomes unknown; `unknown_reason` says which, per pixel.
+ *     On a slanted field a window's a^2-weighted answer belongs to its texture's centroid, not its centre: it
+ *     is moved back along the field's slope (without this, a freckle near the edge of a window on the side of
+ *     a limb, where the disparity changes by ~0.8 px per row, biased the window by a pixel or more in clumps
+ *     that looked like plaques).
  *  4. Uncertainty: sigma_d^2 = s^2 / sum(w * Ix^2) over the window, s^2 the window's residual variance
  *     (the Gauss-Newton covariance of the fitted shift), inflated by (1 + phi)/(1 - phi) per direction with
  *     phi = the product of the lag-1 correlations of residual and gradient in the window (an AR(1) model of
@@ -75,10 +80,12 @@ struct DenseStereoOptions {
   double refine_max_shift = 1.0; //!< px at the semi-global level: a fit farther than this from its value = unknown
   double max_sigma = 1.0;        //!< px: pixels with a larger disparity sigma are unknown
   double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
-  /** Windowed normalised correlation of the fit below which = unknown. Two noisy views of the same texture
-   *  correlate at SNR^2 / (1 + SNR^2) only: skin with texture about as strong as the sensor noise reaches ~0.5,
-   *  so for skin (with weak_texture) 0.2 rejects only windows that do not look alike; sigma judges the rest. */
-  double min_correlation = 0.2;
+  /** Normalised correlation below which = unknown, of the fitted pair low-passed (Gaussian, 1 px) over a window
+   *  twice refine_window: two noisy views of the same texture correlate at SNR^2 / (1 + SNR^2) only, and at
+   *  full resolution skin's weak texture is about as strong as the sensor noise; low-passed, the noise is
+   *  averaged and a true match reaches 0.6-0.9 while a wrong one stays below ~0.45 (skin scenes, slant-corrected
+   *  fit). 0.5 = the texture's signal at least equals the noise. */
+  double min_correlation = 0.5;
   /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
    *  with correlation >= 0.5), islands of valid pixels removed at full resolution; the default since issue 15.
    *  Off: only SGBM's answers are refined (the speckle plate's matcher before issue 15). */
@@ -91,6 +98,22 @@ struct DenseStereoTiming {
   double prepare = 0, sgbm = 0, refine = 0, total = 0;
 };
 
+/** @brief Why a pixel of the ROI has no disparity (DisparityMap::unknown_reason). */
+enum class UnknownReason : uchar {
+  kKnown = 0,
+  kNoSemiGlobal = 1,   //!< weak_texture off and the semi-global matcher had no answer
+  kTexture = 2,        //!< too little texture in the fit's window (min_texture)
+  kSigma = 3,          //!< the fit's sigma above max_sigma
+  kCorrelation = 4,    //!< the views do not look alike (min_correlation; stricter in the semi-global matcher's holes)
+  kDisagreement = 5,   //!< the fit moved more than refine_max_shift from the semi-global value
+  kIsland = 6,         //!< a small island of valid pixels (speckle filter at full resolution)
+  kBorder = 7,         //!< the matching window reaches beyond either image
+  kCount = 8
+};
+
+/** @brief Short name of an UnknownReason ("texture", "sigma", ...). */
+const char* unknownReasonName(UnknownReason r);
+
 struct DisparityMap {
   cv::Mat disparity;        //!< CV_32F, size of the left image, px (x_left - x_right); NaN = unknown or outside ROI
   cv::Mat sigma;            //!< CV_32F, px, 1 sigma of the disparity; NaN where unknown
@@ -98,6 +121,11 @@ struct DisparityMap {
   cv::Rect roi;             //!< the region actually matched (the option clipped to the image)
   int coarse_scale = 1;     //!< 2^levels: the semi-global matcher's downsampling factor
   double valid_fraction = 0;  //!< known pixels / ROI pixels
+  /** CV_8U, size of the left image: an UnknownReason per pixel of the ROI (0 = known), 255 outside the ROI;
+   *  empty if nothing could be matched (see warnings). */
+  cv::Mat unknown_reason;
+  /** Share of the ROI's pixels unknown for each reason (index = UnknownReason; [0] = valid_fraction). */
+  std::vector<double> unknown_share;
   std::vector<std::string> warnings;  //!< human-readable problems (no texture, little overlap, saturation...)
   DenseStereoTiming timing;
 };
@@ -109,6 +137,16 @@ struct DisparityMap {
  *         error: the map is all NaN and `warnings` says why.
  */
 DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& options);
+
+/** @brief "unknown: 12.3 % correlation, 4.1 % sigma, ..." (reasons over 0.05 % of the ROI, largest first). */
+std::string describeUnknown(const DisparityMap& map);
+
+/**
+ * @brief Picture of why pixels have no disparity: the left image in grey, unknown pixels coloured by reason
+ * (texture blue, sigma yellow, correlation red, disagreement magenta, island cyan, no semi-global answer
+ * orange, border dark grey), a legend in the top-left corner. Empty if the map has no unknown_reason.
+ */
+cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left);
 
 /**
  * @brief Full-resolution disparity range [min, max] of depths z_min ... z_max (m, along the rectified

@@ -19,8 +19,11 @@ namespace {
 using common::num;
 using Clock = std::chrono::steady_clock;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr int kMaxCoarseDisparities = 640;
-constexpr float kHoleCorrelation = 0.5f;  // normalised correlation a fit needs where SGBM left a hole  // deeper searches are done at a coarser level
+constexpr int kMaxCoarseDisparities = 640;  // deeper searches are done at a coarser level
+// Where SGBM left a hole, the fit alone decides: it needs a full-resolution correlation of 0.5 and a low-passed one
+// (Refined::corr_smooth) of 0.7 (on the skin scenes, hole fits below that were mostly wrong by > 0.15 mm).
+constexpr float kHoleCorrelation = 0.5f;
+constexpr float kHoleCorrelationSmooth = 0.7f;
 constexpr float kMinSigma = 0.005f;  // px: floor of the reported sigma (interpolation and 8-bit quantisation)
 
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
@@ -230,6 +233,9 @@ cv::Mat followSlant(const cv::Mat& l8, const cv::Mat& r8, const cv::Mat& dc, con
 struct Refined {
   cv::Mat d, v;            // disparity (crop coordinates: x_l - x_r') and vertical shift
   cv::Mat sigma, corr, texture;
+  /** Normalised correlation of the pair low-passed (Gaussian, sigma 1 px) over a window twice as wide: the
+   *  views compared where the sensor noise is averaged (skin's texture is mostly coarser than a pixel). */
+  cv::Mat corr_smooth;
 };
 
 /**
@@ -250,6 +256,21 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   const int big = std::max(3, 4 * window + 1) | 1;  // the vertical shift is a smooth field: averaged widely
   // where each left pixel looks in the right image under the current field
   auto fillMaps = [&]() { rowShiftMaps(d, v, x_offset, mapx, mapy); };
+  // Slant of the disparity field (px per px), from the starting field smoothed over about a window: a window's
+  // answer is referred to its centre along this slant (see below), and the right image's gradient, resampled
+  // into left coordinates, is scaled by the horizontal compression 1 - dd/dx.
+  cv::Mat slope_x, slope_y, ramp, ones;
+  {
+    cv::Mat ds;
+    cv::GaussianBlur(d, ds, cv::Size(), 0.5 * window, 0.5 * window, cv::BORDER_REPLICATE);
+    cv::Sobel(ds, slope_x, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
+    cv::Sobel(ds, slope_y, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
+    slope_x = cv::min(cv::max(slope_x, -2.0), 0.9);  // 1 - dd/dx > 0 on any surface both cameras see
+    slope_y = cv::min(cv::max(slope_y, -2.0), 2.0);
+    ramp.create(1, window, CV_32F);
+    ones = cv::Mat(1, window, CV_32F, cv::Scalar(1.0 / window));
+    for (int i = 0; i < window; ++i) ramp.at<float>(0, i) = static_cast<float>(i - window / 2) / window;
+  }
   for (int it = 0; it < iterations; ++it) {
     fillMaps();
     remapCatmullRom(R, mapx, mapy, Rw);
@@ -258,6 +279,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     e = L - Rw;
     // Symmetric gradients (mean of both images): no first-order bias from using one image's gradient.
     // L = Rw(x - delta, y + nu) ~ Rw - gx delta + gy nu  =>  e = a delta + b nu, a = -gx, b = gy.
+    Rxw = Rxw.mul(1.0 - slope_x);
     a = -0.5 * (Lx + Rxw);
     b = 0.5 * (Ly + Ryw);
     cv::boxFilter(a.mul(a), saa, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
@@ -285,8 +307,18 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     // Each window's estimate linearises around its neighbours' current values, so the window's answer is
     // its a^2-weighted mean of d plus the update (not the pixel's own d plus the update: with a box window
     // that would amplify high-frequency noise, whose box response is negative, every iteration).
+    // On a slanted field that mean belongs to the window's texture centroid, not to its centre: where the
+    // texture sits off-centre (a freckle near one side) it is moved back along the slant,
+    // d(centre) = mean - slope . (centroid - centre); mx, my = the a^2-weighted mean offsets (times saa).
     cv::Mat sad;
-    cv::boxFilter(a.mul(a).mul(d), sad, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    const cv::Mat aa = a.mul(a);
+    cv::boxFilter(aa.mul(d), sad, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    {
+      cv::Mat mx, my;
+      cv::sepFilter2D(aa, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
+      cv::sepFilter2D(aa, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
+      sad -= slope_x.mul(mx) + slope_y.mul(my);
+    }
     for (int y = 0; y < L.rows; ++y) {
       const float* p = saa.ptr<float>(y);
       const float* s = sae.ptr<float>(y);
@@ -308,6 +340,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     fillMaps();
     remapCatmullRom(R, mapx, mapy, Rw);
     remapCatmullRom(Rx, mapx, mapy, Rxw);
+    Rxw = Rxw.mul(1.0 - slope_x);
     e = L - Rw;
     a = -0.5 * (Lx + Rxw);
     cv::Mat see, sll, srr, slr;
@@ -331,6 +364,18 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
       return r;
     };
     const cv::Mat phx = lag1(e, true).mul(lag1(a, true)), phy = lag1(e, false).mul(lag1(a, false));
+    {
+      cv::Mat lb, rb, sl2, sr2, slr2;
+      cv::GaussianBlur(L, lb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT);
+      cv::GaussianBlur(Rw, rb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT);
+      const cv::Size win2(2 * window + 1, 2 * window + 1);
+      cv::boxFilter(lb.mul(lb), sl2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::boxFilter(rb.mul(rb), sr2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::boxFilter(lb.mul(rb), slr2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      cv::Mat den;
+      cv::sqrt(sl2.mul(sr2), den);
+      cv::divide(slr2, cv::max(den, 1e-8), out.corr_smooth);
+    }
     const double n = static_cast<double>(window) * window;
     out.sigma.create(L.size(), CV_32F);
     out.corr.create(L.size(), CV_32F);
@@ -444,7 +489,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
       coarse_roi_c.area() > 0 ? cv::countNonZero(dc(coarse_roi_c) == dc(coarse_roi_c)) / static_cast<double>(coarse_roi_c.area())
                               : 0.0;
 
-  cv::Mat d_full, v_full, sigma_full, valid_full;
+  cv::Mat d_full, v_full, sigma_full, valid_full, reason_full;  // reason_full: UnknownReason per crop pixel
   // texture of the left roi at the coarse level (normalised gradient energy; a uniform image has ~0)
   double texture = 0;
   {
@@ -476,6 +521,8 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     cv::Mat known;
     cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
     valid_full = known;
+    reason_full = cv::Mat(known.size(), CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
+    reason_full.setTo(0, known);
     // SGBM's parabola: typically 0.1-0.3 px at its level (pixel locking); a nominal 0.25 px, scaled
     sigma_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0.25 * s));
     v_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0));
@@ -521,22 +568,37 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
       cv::resize(coarse_known, valid_full, lf.size(), 0, 0, cv::INTER_NEAREST);
       valid_full = valid_full(fine).clone();
     }
+    reason_full = cv::Mat(valid_full.size(), CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
+    reason_full.setTo(0, valid_full);
     const float max_shift = static_cast<float>(o.refine_max_shift * s);
     for (int y = 0; y < valid_full.rows; ++y) {
       uchar* vp = valid_full.ptr<uchar>(y);
+      uchar* rp = reason_full.ptr<uchar>(y);
       const float* dp = d_full.ptr<float>(y);
       const float* gp = sgm_up.ptr<float>(y);
       const float* sg = r.sigma.ptr<float>(y);
       const float* cr = r.corr.ptr<float>(y);
+      const float* cs = r.corr_smooth.ptr<float>(y);
       const float* tx = r.texture.ptr<float>(y);
       for (int x = 0; x < valid_full.cols; ++x) {
         if (!vp[x]) continue;
-        // where the semi-global matcher had no answer, the fit alone must show that the views look alike
-        const float min_corr = std::isfinite(gp[x]) ? static_cast<float>(o.min_correlation) : kHoleCorrelation;
-        if (!(sg[x] <= o.max_sigma) || cr[x] < min_corr || tx[x] < o.min_texture) {
-          vp[x] = 0;  // the images do not look alike here, or there is nothing to fit
-        } else if ((!o.weak_texture || std::isfinite(gp[x])) && !(std::fabs(dp[x] - gp[x]) <= max_shift)) {
-          vp[x] = 0;  // the fit and the semi-global matcher disagree: one of them is wrong
+        // where the semi-global matcher had no answer, the fit alone must show that the views look alike, at
+        // full resolution too
+        const bool hole = !std::isfinite(gp[x]);
+        const bool alike = hole ? cs[x] >= kHoleCorrelationSmooth && cr[x] >= kHoleCorrelation
+                                : cs[x] >= static_cast<float>(o.min_correlation);
+        UnknownReason why = UnknownReason::kKnown;
+        if (tx[x] < o.min_texture)
+          why = UnknownReason::kTexture;  // nothing to fit
+        else if (!alike)
+          why = UnknownReason::kCorrelation;  // the images do not look alike here
+        else if (!(sg[x] <= o.max_sigma))
+          why = UnknownReason::kSigma;
+        else if ((!o.weak_texture || std::isfinite(gp[x])) && !(std::fabs(dp[x] - gp[x]) <= max_shift))
+          why = UnknownReason::kDisagreement;  // the fit and the semi-global matcher disagree: one of them is wrong
+        if (why != UnknownReason::kKnown) {
+          vp[x] = 0;
+          rp[x] = static_cast<uchar>(why);
         }
       }
     }
@@ -553,7 +615,9 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
         q[x] = vp[x] && std::isfinite(dp[x]) ? static_cast<short>(std::clamp(std::lround(dp[x] * 4.0f), -32000L, 32000L)) : -32768;
     }
     cv::filterSpeckles(d16, -32768, o.speckle_window * s * s, static_cast<double>(4 * s) * o.speckle_range);
-    valid_full.setTo(0, d16 == -32768);
+    const cv::Mat island = (d16 == -32768) & valid_full;
+    reason_full.setTo(static_cast<int>(UnknownReason::kIsland), island);
+    valid_full.setTo(0, island);
   }
   const auto t3 = Clock::now();
 
@@ -562,9 +626,13 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   const cv::Rect in_crop(pad - c0, margin_y, roi.width, roi.height);
   const int half = (o.subpixel == "lk" ? o.refine_window : o.block_size) / 2;
   int known = 0;
+  out.unknown_reason = cv::Mat(left.size(), CV_8U, cv::Scalar(255));
+  out.unknown_reason(roi).setTo(static_cast<int>(UnknownReason::kBorder));
   for (int y = 0; y < roi.height; ++y) {
     const int yi = y + roi.y;
     if (yi < half || yi >= left.rows - half) continue;
+    const uchar* why = reason_full.ptr<uchar>(y + in_crop.y) + in_crop.x;
+    uchar* ow = out.unknown_reason.ptr<uchar>(yi) + roi.x;
     const float* dp = d_full.ptr<float>(y + in_crop.y) + in_crop.x;
     const float* vp = v_full.ptr<float>(y + in_crop.y) + in_crop.x;
     const float* sp = sigma_full.ptr<float>(y + in_crop.y) + in_crop.x;
@@ -573,7 +641,10 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     float* ov = out.vertical.ptr<float>(yi) + roi.x;
     float* os = out.sigma.ptr<float>(yi) + roi.x;
     for (int x = 0; x < roi.width; ++x) {
-      if (!ok[x]) continue;
+      if (!ok[x]) {
+        ow[x] = why[x];
+        continue;
+      }
       const int xi = x + roi.x;
       const float d = dp[x] + static_cast<float>(d_min);
       const float xr = static_cast<float>(xi) - d;
@@ -581,10 +652,19 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
       od[x] = d;
       ov[x] = vp[x];
       os[x] = std::max(sp[x], kMinSigma);
+      ow[x] = 0;
       ++known;
     }
   }
   out.valid_fraction = known / static_cast<double>(roi.area());
+  {
+    std::vector<int> counts(static_cast<size_t>(UnknownReason::kCount), 0);
+    for (int y = roi.y; y < roi.y + roi.height; ++y) {
+      const uchar* w = out.unknown_reason.ptr<uchar>(y);
+      for (int x = roi.x; x < roi.x + roi.width; ++x) ++counts[w[x] < counts.size() ? w[x] : 0];
+    }
+    for (int c : counts) out.unknown_share.push_back(c / static_cast<double>(roi.area()));
+  }
   if (out.valid_fraction < 0.1)
     out.warnings.push_back("little matched: " + num(std::round(1000 * out.valid_fraction) / 10) +
                            " % of the roi has a disparity (texture, overlap, saturation or disparity range?)");
@@ -592,6 +672,62 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   out.timing.sgbm = seconds(t1, t2);
   out.timing.refine = seconds(t2, t3);
   out.timing.total = seconds(t0, Clock::now());
+  return out;
+}
+
+const char* unknownReasonName(UnknownReason r) {
+  switch (r) {
+    case UnknownReason::kKnown: return "known";
+    case UnknownReason::kNoSemiGlobal: return "no semi-global answer";
+    case UnknownReason::kTexture: return "texture";
+    case UnknownReason::kSigma: return "sigma";
+    case UnknownReason::kCorrelation: return "correlation";
+    case UnknownReason::kDisagreement: return "disagreement";
+    case UnknownReason::kIsland: return "island";
+    case UnknownReason::kBorder: return "border";
+    default: return "?";
+  }
+}
+
+std::string describeUnknown(const DisparityMap& map) {
+  std::vector<std::pair<double, int>> r;
+  for (size_t i = 1; i < map.unknown_share.size(); ++i)
+    if (map.unknown_share[i] >= 5e-4) r.emplace_back(map.unknown_share[i], static_cast<int>(i));
+  std::sort(r.rbegin(), r.rend());
+  std::string s = "unknown:";
+  if (r.empty()) s += " none";
+  for (size_t i = 0; i < r.size(); ++i)
+    s += (i ? ", " : " ") + num(std::round(1000 * r[i].first) / 10) + " % " +
+         unknownReasonName(static_cast<UnknownReason>(r[i].second));
+  return s;
+}
+
+cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left) {
+  if (map.unknown_reason.empty() || left.size() != map.unknown_reason.size()) return {};
+  static const cv::Vec3b colour[] = {{0, 0, 0},     {0, 140, 255}, {255, 80, 0},   {0, 220, 255},
+                                     {0, 0, 230},   {220, 0, 220}, {230, 230, 0},  {60, 60, 60}};  // BGR
+  cv::Mat grey = left, out;
+  if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
+  if (grey.depth() != CV_8U) grey.convertTo(grey, CV_8U, grey.depth() == CV_16U ? 1.0 / 256 : 255.0);
+  cv::cvtColor(grey, out, cv::COLOR_GRAY2BGR);
+  for (int y = 0; y < out.rows; ++y) {
+    const uchar* w = map.unknown_reason.ptr<uchar>(y);
+    cv::Vec3b* o = out.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < out.cols; ++x)
+      if (w[x] > 0 && w[x] < static_cast<uchar>(UnknownReason::kCount)) {
+        const cv::Vec3b& c = colour[w[x]];
+        for (int k = 0; k < 3; ++k) o[x][k] = static_cast<uchar>((o[x][k] + 3 * c[k]) / 4);
+      }
+  }
+  const double scale = std::max(1.0, out.cols / 1500.0);
+  for (int i = 1; i < static_cast<int>(UnknownReason::kCount); ++i) {
+    const int y = static_cast<int>(scale * (10 + 24 * i));
+    cv::rectangle(out, cv::Rect(static_cast<int>(10 * scale), y - static_cast<int>(16 * scale), static_cast<int>(16 * scale),
+                                static_cast<int>(16 * scale)),
+                  cv::Scalar(colour[i][0], colour[i][1], colour[i][2]), cv::FILLED);
+    cv::putText(out, unknownReasonName(static_cast<UnknownReason>(i)), cv::Point(static_cast<int>(34 * scale), y),
+                cv::FONT_HERSHEY_SIMPLEX, 0.6 * scale, cv::Scalar(255, 255, 255), std::max(1, static_cast<int>(scale)));
+  }
   return out;
 }
 

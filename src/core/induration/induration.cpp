@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <numeric>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -846,15 +847,19 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     std::nth_element(hv.begin(), hv.begin() + hv.size() / 2, hv.end());
     const double median = hv[hv.size() / 2];
     const double edge = std::max(threshold, o.edge_fraction * median);
+    // The core holds the plaque's top: a pixel of its region far above the core's highest is another bump (a
+    // stripe of mismatches along the measured surface's edge, a neighbouring higher plaque), not this plaque.
+    std::nth_element(hv.begin(), hv.begin() + static_cast<std::ptrdiff_t>(0.99 * (hv.size() - 1)), hv.end());
+    const double ceiling = 2.0 * hv[static_cast<std::size_t>(0.99 * (hv.size() - 1))] + threshold;
     // region at the edge threshold connected to the core, within a margin around the core's box; the margin
     // doubles (up to 3 times) while the region reaches the box's border inside the image: the part of a plaque
     // beyond its core's box (past a gap the core could not cross) must not be cut off along a straight line
     int m = 4 * std::max(1, static_cast<int>(std::ceil(best.smoothing))) + 2 * o.exclusion_margin_px + 2;
     cv::Rect box;
     cv::Mat mask;
-    for (int grow = 0;; ++grow, m *= 2) {
-      box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
-      cv::Mat region = hs(box) > edge;
+    // the region above `edge` (and below `upper`) connected to the core, in the box
+    auto connected = [&](const cv::Rect& box, double upper) {
+      cv::Mat region = (hs(box) > edge) & (hs(box) < upper);
       if (o.interior_margin_px > 0) {
         cv::morphologyEx(region, region, cv::MORPH_CLOSE, join);
         region.setTo(0, off_band(box));
@@ -866,10 +871,15 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
         for (int x = bb.x; x < bb.x + bb.width; ++x)
           if (lab.at<int>(y, x) == k) keep[rl.at<int>(y - box.y, x - box.x)] = 1;
       keep[0] = 0;
-      mask = cv::Mat::zeros(box.size(), CV_8U);
+      cv::Mat out = cv::Mat::zeros(box.size(), CV_8U);
       for (int y = 0; y < box.height; ++y)
         for (int x = 0; x < box.width; ++x)
-          if (keep[rl.at<int>(y, x)]) mask.at<uchar>(y, x) = 255;
+          if (keep[rl.at<int>(y, x)]) out.at<uchar>(y, x) = 255;
+      return out;
+    };
+    for (int grow = 0;; ++grow, m *= 2) {
+      box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
+      mask = connected(box, ceiling);
       const bool touches = (box.x > 0 && cv::countNonZero(mask.col(0)) > 0) || (box.y > 0 && cv::countNonZero(mask.row(0)) > 0) ||
                            (box.x + box.width < xyz.cols && cv::countNonZero(mask.col(box.width - 1)) > 0) ||
                            (box.y + box.height < xyz.rows && cv::countNonZero(mask.row(box.height - 1)) > 0);
@@ -885,11 +895,13 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     {
       // A core whose half-height region reaches a plaque drawn already (from a larger core) is that plaque's
       // shoulder (its ramp, a step the matcher blurred, a piece past a gap): no valley below its half height
-      // separates them, so it is not a plaque of its own.
+      // separates them, so it is not a plaque of its own. (Without the ceiling: the way up to a higher plaque
+      // is above the core's own top.)
+      const cv::Mat loose = connected(box, std::numeric_limits<double>::infinity());
       int overlap = 0;
       for (int y = 0; y < box.height && overlap < 10; ++y)
         for (int x = 0; x < box.width; ++x)
-          if (mask.at<uchar>(y, x) && final_labels.at<int>(y + box.y, x + box.x) != 0) ++overlap;
+          if (loose.at<uchar>(y, x) && final_labels.at<int>(y + box.y, x + box.x) != 0) ++overlap;
       if (overlap >= 10) continue;
     }
     // statistics: area and centroid over the whole plaque; heights over its interior (the plaque eroded by

@@ -32,6 +32,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "conversions.h"
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/stereo/dense_stereo.h"
 
@@ -45,6 +46,7 @@ class DenseStereoNodelet : public nodelet::Nodelet {
   using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
 
   void onInit() override {
+    keepLargeBuffers();  // process-wide: full-resolution buffers from the heap, not fresh mmap()s
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     std::vector<std::string> errors;

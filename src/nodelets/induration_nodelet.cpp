@@ -33,6 +33,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "conversions.h"
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/induration/induration.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/induration/induration_io.h"
@@ -53,6 +54,7 @@ class IndurationNodelet : public nodelet::Nodelet {
 
  private:
   void onInit() override {
+    keepLargeBuffers();  // process-wide: full-resolution buffers from the heap, not fresh mmap()s
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     std::vector<std::string> errors;

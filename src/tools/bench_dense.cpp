@@ -45,6 +45,7 @@
 
 #include "skin3d/ros/bag_topics.h"
 #include "conversions.h"  // src/nodelets: CameraInfo message -> core struct
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/dense_stereo.h"
 #include "skin3d/stereo/rectification.h"
@@ -159,6 +160,7 @@ void plainSgbm(const cv::Mat& left, const cv::Mat& right, const cv::Rect& roi, d
 }  // namespace
 
 int main(int argc, char** argv) {
+  skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   std::string bag_ns;  // "" = the root, or the one namespace holding the stereo topics
   std::string bag_path;
   long frames_wanted = 1;

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/calibration.h"
 #include "skin3d/stereo/dense_stereo.h"
@@ -331,6 +332,7 @@ std::string fixed(double v, int digits) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   Args args;
   try {
     if (!parseArgs(argc, argv, &args)) {

@@ -30,6 +30,7 @@
 #include <string>
 
 #include "conversions.h"  // src/nodelets
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
 #include "skin3d/sim/globe.h"
@@ -679,6 +680,7 @@ bool parseArgs(int argc, char** argv, Options* o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   Options o;
   if (!parseArgs(argc, argv, &o)) {
     std::cerr << kUsage;

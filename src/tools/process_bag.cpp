@@ -52,6 +52,7 @@
 #include "skin3d/ros/bag_topics.h"
 #include "run_info.h"
 #include "stereo_pairs.h"
+#include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/sphere_fit.h"
 #include "skin3d/slam/results.h"
 #include "skin3d/slam/slam_config.h"
@@ -272,6 +273,7 @@ int run(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   Args a;
   a.command_line.assign(argv, argv + argc);
   for (int i = 1; i < argc; ++i) {

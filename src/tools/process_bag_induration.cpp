@@ -66,28 +66,39 @@ int runInduration(const IndurationRun& a) {
   std::filesystem::create_directories(a.out);
 
   auto process = [&](const sensor_msgs::Image& left, const sensor_msgs::Image& right) {
-    const auto t0 = std::chrono::steady_clock::now();
+    using Clock = std::chrono::steady_clock;
+    const auto t0 = Clock::now();
+    auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
     const cv::Mat L = pairs_in.rectifyLeft(left);
     const cv::Mat R = pairs_in.rectifyRight(right);
+    const double t_rectify = since(t0);
     const geometry::CameraInfo& info_l = pairs_in.leftInfo();
     const geometry::CameraInfo& info_r = pairs_in.rightInfo();
     stereo::DenseStereoOptions d = opt.dense;
     const auto range = stereo::disparityRangeForDepth(info_l, info_r, opt.z_min, opt.z_max);
     d.min_disparity = range.first;
     d.max_disparity = range.second;
+    auto t1 = Clock::now();
     const stereo::DisparityMap map = stereo::computeDisparity(L, R, d);
+    const double t_match = since(t1);
+    t1 = Clock::now();
     const stereo::DenseCloud cloud = stereo::triangulateDisparity(map, info_l, info_r);
+    const double t_triangulate = since(t1);
     induration::FrameRecord rec;
     rec.stamp = left.header.stamp.toSec();
+    t1 = Clock::now();
     rec.result = induration::measureInduration(cloud, opt.induration);
+    const double t_measure = since(t1);
     for (const auto& w : map.warnings) rec.result.warnings.insert(rec.result.warnings.begin(), "dense stereo: " + w);
     rec.valid_fraction = map.valid_fraction;
     rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!a.quiet) {
       std::printf("frame %zu/%d (t = %.3f s): %.1f %% matched, reference RMS %.4f mm, %zu plaques, %.1f s "
-                  "(sgbm %.1f s, refine %.1f s)\n",
+                  "(rectification %.1f s, matching %.1f s of which sgbm %.1f s and refinement %.1f s, triangulation %.1f s, "
+                  "measurement %.1f s)\n",
                   records.size() + 1, expected, rec.stamp, 100 * map.valid_fraction, rec.result.reference.rms * 1e3,
-                  rec.result.plaques.size(), rec.seconds, map.timing.sgbm, map.timing.refine);
+                  rec.result.plaques.size(), rec.seconds, t_rectify, t_match, map.timing.sgbm, map.timing.refine, t_triangulate,
+                  t_measure);
       std::printf("  %s\n", stereo::describeUnknown(map).c_str());
       for (const auto& w : rec.result.warnings) std::printf("  warning: %s\n", w.c_str());
       std::fflush(stdout);

@@ -8,10 +8,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../common/parallel.h"
 #include "../common/text.h"
 #include "reference_ransac.h"
 
@@ -129,37 +131,54 @@ cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref) {
   return h;
 }
 
+/** smoothNaN of one map at several sigmas: the known mask, the zero-filled map and their reductions are made
+ *  once (the adaptive smoothing tries a few sigmas on the same heights). */
+class NanSmoother {
+ public:
+  explicit NanSmoother(const cv::Mat& h) : h_(h) {
+    k_ = (h == h);
+    v_ = h.clone();
+    v_.setTo(0, ~k_);
+    k_.convertTo(w_, CV_32F, 1.0 / 255.0);
+  }
+
+  cv::Mat operator()(double sigma) {
+    if (sigma <= 0) return h_.clone();
+    cv::Mat vs, ws;
+    int f = 1;
+    while (sigma / f > 4 && std::min(h_.rows, h_.cols) / (2 * f) >= 16) f *= 2;
+    if (f == 1) {
+      runTasks({[&] { cv::GaussianBlur(v_, vs, cv::Size(), sigma, sigma, cv::BORDER_REFLECT); },
+                [&] { cv::GaussianBlur(w_, ws, cv::Size(), sigma, sigma, cv::BORDER_REFLECT); }});
+    } else {
+      // sigma^2 = (f sigma_r)^2 + (area kernel f and bilinear return, about f^2 / 6 together): the reduced
+      // map's Gaussian makes up the rest
+      const double sr = std::sqrt(std::max(1.0, sigma * sigma / (f * f) - 1.0 / 6.0));
+      auto& red = reduced_[f];
+      const cv::Size small((h_.cols + f - 1) / f, (h_.rows + f - 1) / f);
+      const bool first = red.first.empty();
+      auto one = [&](const cv::Mat& full, cv::Mat& reduced, cv::Mat& back) {
+        if (first) cv::resize(full, reduced, small, 0, 0, cv::INTER_AREA);
+        cv::Mat b;
+        cv::GaussianBlur(reduced, b, cv::Size(), sr, sr, cv::BORDER_REFLECT);
+        cv::resize(b, back, h_.size(), 0, 0, cv::INTER_LINEAR);
+      };
+      runTasks({[&] { one(v_, red.first, vs); }, [&] { one(w_, red.second, ws); }});
+    }
+    cv::Mat out = vs / ws;
+    out.setTo(kNaN, ~k_);
+    return out;
+  }
+
+ private:
+  cv::Mat h_, k_, v_, w_;
+  std::map<int, std::pair<cv::Mat, cv::Mat>> reduced_;  // reduction factor: the zero-filled map and its weights
+};
+
 /** NaN-aware Gaussian smoothing (normalised convolution). A wide Gaussian (sigma > 4 px) is applied on a
  *  map reduced by a power of two f (area averages; sigma / f in [2, 4] px there) and brought back bilinearly:
  *  the same smoothing within a few per cent, at a fraction of the cost on a 13-megapixel map. */
-cv::Mat smoothNaN(const cv::Mat& h, double sigma) {
-  if (sigma <= 0) return h.clone();
-  cv::Mat k = (h == h), v = h.clone(), w;
-  v.setTo(0, ~k);
-  k.convertTo(w, CV_32F, 1.0 / 255.0);
-  cv::Mat vs, ws;
-  int f = 1;
-  while (sigma / f > 4 && std::min(h.rows, h.cols) / (2 * f) >= 16) f *= 2;
-  if (f == 1) {
-    cv::GaussianBlur(v, vs, cv::Size(), sigma, sigma, cv::BORDER_REFLECT);
-    cv::GaussianBlur(w, ws, cv::Size(), sigma, sigma, cv::BORDER_REFLECT);
-  } else {
-    // sigma^2 = (f sigma_r)^2 + (area kernel f and bilinear return, about f^2 / 6 together): the reduced
-    // map's Gaussian makes up the rest
-    const double sr = std::sqrt(std::max(1.0, sigma * sigma / (f * f) - 1.0 / 6.0));
-    const cv::Size small((h.cols + f - 1) / f, (h.rows + f - 1) / f);
-    cv::Mat vr, wr;
-    cv::resize(v, vr, small, 0, 0, cv::INTER_AREA);
-    cv::resize(w, wr, small, 0, 0, cv::INTER_AREA);
-    cv::GaussianBlur(vr, vr, cv::Size(), sr, sr, cv::BORDER_REFLECT);
-    cv::GaussianBlur(wr, wr, cv::Size(), sr, sr, cv::BORDER_REFLECT);
-    cv::resize(vr, vs, h.size(), 0, 0, cv::INTER_LINEAR);
-    cv::resize(wr, ws, h.size(), 0, 0, cv::INTER_LINEAR);
-  }
-  cv::Mat out = vs / ws;
-  out.setTo(kNaN, ~k);
-  return out;
-}
+cv::Mat smoothNaN(const cv::Mat& h, double sigma) { return NanSmoother(h)(sigma); }
 
 /** Smoothed map with small gaps (up to a few times `gap_px` wide) filled from their surroundings: where the
  *  matcher leaves a plaque's step edge unknown, the boundary at half height then falls in the gap's middle. */
@@ -170,8 +189,8 @@ cv::Mat smoothFilled(const cv::Mat& h, double sigma, double gap_px) {
   k.convertTo(w, CV_32F, 1.0 / 255.0);
   for (double g = 0.5 * gap_px; g <= 2 * gap_px; g *= 2) {
     cv::Mat vs, ws;
-    cv::GaussianBlur(v, vs, cv::Size(), g, g, cv::BORDER_REFLECT);
-    cv::GaussianBlur(w, ws, cv::Size(), g, g, cv::BORDER_REFLECT);
+    runTasks({[&] { cv::GaussianBlur(v, vs, cv::Size(), g, g, cv::BORDER_REFLECT); },
+              [&] { cv::GaussianBlur(w, ws, cv::Size(), g, g, cv::BORDER_REFLECT); }});
     for (int y = 0; y < out.rows; ++y)
       for (int x = 0; x < out.cols; ++x)
         if (std::isnan(out.at<float>(y, x)) && ws.at<float>(y, x) > 0.05f) out.at<float>(y, x) = vs.at<float>(y, x) / ws.at<float>(y, x);
@@ -216,6 +235,19 @@ Eigen::Matrix<double, 10, 3> monomialGradients(const Eigen::Vector3d& y) {
   return J;
 }
 
+/** F(y) = monomials(y) . theta, written out (the per-pixel height calls it a few times per pixel). */
+inline double quadricValue(const Vec10& t, const Eigen::Vector3d& y) {
+  const double a = y.x(), b = y.y(), c = y.z();
+  return t(0) * a * a + t(1) * b * b + t(2) * c * c + t(3) * a * b + t(4) * a * c + t(5) * b * c + t(6) * a + t(7) * b + t(8) * c + t(9);
+}
+
+/** grad F(y) = monomialGradients(y)^T theta, written out. */
+inline Eigen::Vector3d quadricGradient(const Vec10& t, const Eigen::Vector3d& y) {
+  const double a = y.x(), b = y.y(), c = y.z();
+  return Eigen::Vector3d(2 * t(0) * a + t(3) * b + t(4) * c + t(6), 2 * t(1) * b + t(3) * a + t(5) * c + t(7),
+                         2 * t(2) * c + t(4) * a + t(5) * b + t(8));
+}
+
 /** Weighted Taubin fit of an implicit quadric (normalised coordinates): min sum w F^2 / sum w |grad F|^2. */
 bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<double>& w, Vec10* theta) {
   Eigen::Matrix<double, 10, 10> M = Eigen::Matrix<double, 10, 10>::Zero(), N = Eigen::Matrix<double, 10, 10>::Zero();
@@ -225,7 +257,7 @@ bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<dou
     const Vec10 m = monomials(ys[i]);
     const Eigen::Matrix<double, 10, 3> J = monomialGradients(ys[i]);
     M.noalias() += w[i] * m * m.transpose();
-    N.noalias() += w[i] * J * J.transpose();
+    N.noalias() += (w[i] * J).lazyProduct(J.transpose());  // coefficient-wise: a GEMM call per point costs more
     ws += w[i];
   }
   if (ws <= 0) return false;
@@ -281,7 +313,7 @@ bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double m
     // orient: positive towards the camera (the origin) at the weighted median point
     double vote = 0;
     for (std::size_t i = 0; i < pts.size(); i += std::max<std::size_t>(1, pts.size() / 2000)) {
-      const Eigen::Vector3d g = monomialGradients(ys[i]).transpose() * theta;
+      const Eigen::Vector3d g = quadricGradient(theta, ys[i]);
       vote += w[i] * (g.dot(-pts[i]) > 0 ? 1 : -1);
     }
     cur.q_sign = vote >= 0 ? 1.0 : -1.0;
@@ -417,14 +449,18 @@ double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_heig
  * margin, and a plaque is not cut into pieces by noise crossing it; no wider than that, since a wide Gaussian
  * merges neighbouring plaques and rounds their outlines. On a speckle plate the start holds;
  * on weakly textured, noisy skin the matcher's noise is several times larger and the smoothing grows with it.
+ * `smoothed`: the map smoothed by the sigma returned.
  */
-double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, double limit, double min_height, double band) {
+double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, double limit, double min_height, double band,
+                         cv::Mat* smoothed) {
+  NanSmoother smooth(h);
   std::vector<double> s{std::max(start, 0.5)}, t;
   while (true) {
-    t.push_back(detectionThreshold(smoothNaN(h, s.back()), use, 0.0, band));
+    *smoothed = smooth(s.back());
+    t.push_back(detectionThreshold(*smoothed, use, 0.0, band));
     const size_t i = t.size() - 1;
     if (t[i] <= 1.5 * min_height) return s[i];
-    if (s[i] >= limit) return limit;
+    if (s[i] >= limit) return limit;  // (s[i] is the limit then: the steps stop at it)
     s.push_back(std::min(limit, s[i] * std::sqrt(2.0)));
   }
 }
@@ -439,7 +475,7 @@ double rayHit(const ReferenceSurface& ref, const Eigen::Vector3d& r) {
   const double T = std::max(1e-3, quadric ? ref.q_centre.norm() : ref.origin.norm() + std::fabs(ref.d));
   auto g = [&](double t) {
     const Eigen::Vector3d x = t * T * r;
-    return quadric ? monomials((x - ref.q_centre) / ref.q_scale).dot(ref.coefficients) : ref.height(x);
+    return quadric ? quadricValue(ref.coefficients, (x - ref.q_centre) / ref.q_scale) : ref.height(x);
   };
   const double f0 = g(0), f1 = g(1), f2 = g(2);
   const double a = 0.5 * (f2 - 2 * f1 + f0), b = f1 - f0 - a, c = f0;
@@ -536,7 +572,7 @@ cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::
         const Eigen::Vector3d X = t * r;
         Eigen::Vector3d n;
         if (ref.model == "quadric") {
-          n = monomialGradients((X - ref.q_centre) / ref.q_scale).transpose() * ref.coefficients;
+          n = quadricGradient(ref.coefficients, (X - ref.q_centre) / ref.q_scale);
           if (!(n.norm() > 0)) continue;
           n.normalize();
         } else {
@@ -603,13 +639,13 @@ Eigen::Vector4d ReferenceSurface::tangentPlane(const Eigen::Vector3d& x) const {
   // foot point of x, then the gradient there
   Eigen::Vector3d y = (x - q_centre) / q_scale;
   for (int i = 0; i < 6; ++i) {
-    const double F = monomials(y).dot(coefficients);
-    const Eigen::Vector3d g = monomialGradients(y).transpose() * coefficients;
+    const double F = quadricValue(coefficients, y);
+    const Eigen::Vector3d g = quadricGradient(coefficients, y);
     const double g2 = g.squaredNorm();
     if (!(g2 > 1e-30)) break;
     y -= F * g / g2;
   }
-  Eigen::Vector3d n = (monomialGradients(y).transpose() * coefficients) * q_sign;
+  Eigen::Vector3d n = quadricGradient(coefficients, y) * q_sign;
   if (!(n.norm() > 0)) return plane();
   n.normalize();
   const Eigen::Vector3d foot = q_centre + q_scale * y;
@@ -623,9 +659,9 @@ double ReferenceSurface::height(const Eigen::Vector3d& x) const {
     Eigen::Vector3d y = y0;
     double F0 = 0;
     for (int i = 0; i < 4; ++i) {
-      const double F = monomials(y).dot(coefficients);
+      const double F = quadricValue(coefficients, y);
       if (i == 0) F0 = F;
-      const Eigen::Vector3d g = monomialGradients(y).transpose() * coefficients;
+      const Eigen::Vector3d g = quadricGradient(coefficients, y);
       const double g2 = g.squaredNorm();
       if (!(g2 > 1e-30)) break;
       y -= F * g / g2;
@@ -725,9 +761,13 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
       if (it > 0 && !fit(use, o.ransac_threshold)) return a;
       const cv::Mat h = heights(xyz, a.ref);
       // the smoothing is chosen on the healthy skin: from the second pass on, once the plaques are masked
-      a.smoothing = it == 0 ? o.smoothing_px
-                            : adaptiveSmoothing(h, use, o.smoothing_px, o.max_smoothing_px, o.min_height, o.ransac_threshold);
-      const cv::Mat hs = smoothNaN(h, a.smoothing);
+      cv::Mat hs;
+      if (it == 0) {
+        a.smoothing = o.smoothing_px;
+        hs = smoothNaN(h, a.smoothing);
+      } else {
+        a.smoothing = adaptiveSmoothing(h, use, o.smoothing_px, o.max_smoothing_px, o.min_height, o.ransac_threshold, &hs);
+      }
       const double threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
       // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
       // bias the next fit downwards, which raises more pixels above the threshold, and so on

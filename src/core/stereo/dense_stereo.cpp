@@ -10,6 +10,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../common/parallel.h"
 #include "../common/text.h"
 
 namespace skin3d {
@@ -130,50 +131,6 @@ void validate(const cv::Mat& left, const cv::Mat& right, const DenseStereoOption
     throw DenseStereoError("slant_passes " + std::to_string(o.slant_passes) + " must be 0 ... 3");
 }
 
-/**
- * Bicubic resampling with the Catmull-Rom kernel (a = -0.5, the interpolating cubic of least phase error)
- * at exact float positions. cv::remap's INTER_CUBIC uses a = -0.75 and quantises positions to 1/32 px:
- * both bias a sub-pixel fit by a few hundredths of a pixel depending on the fractional disparity.
- * Outside the image: 0.
- */
-void remapCatmullRom(const cv::Mat& src, const cv::Mat& mapx, const cv::Mat& mapy, cv::Mat& dst) {
-  CV_Assert(src.type() == CV_32F && mapx.type() == CV_32F && mapy.size() == mapx.size());
-  dst.create(mapx.size(), CV_32F);
-  const int W = src.cols, H = src.rows;
-  cv::parallel_for_(cv::Range(0, mapx.rows), [&](const cv::Range& rows) {
-    for (int y = rows.start; y < rows.end; ++y) {
-      const float* mx = mapx.ptr<float>(y);
-      const float* my = mapy.ptr<float>(y);
-      float* out = dst.ptr<float>(y);
-      for (int x = 0; x < mapx.cols; ++x) {
-        const float fx = mx[x], fy = my[x];
-        const int ix = static_cast<int>(std::floor(fx)), iy = static_cast<int>(std::floor(fy));
-        if (ix < 1 || iy < 1 || ix >= W - 2 || iy >= H - 2) {
-          out[x] = 0.f;
-          continue;
-        }
-        const float tx = fx - ix, ty = fy - iy;
-        float wx[4], wy[4];
-        const float tx2 = tx * tx, tx3 = tx2 * tx, ty2 = ty * ty, ty3 = ty2 * ty;
-        wx[0] = 0.5f * (-tx3 + 2 * tx2 - tx);
-        wx[1] = 0.5f * (3 * tx3 - 5 * tx2 + 2);
-        wx[2] = 0.5f * (-3 * tx3 + 4 * tx2 + tx);
-        wx[3] = 0.5f * (tx3 - tx2);
-        wy[0] = 0.5f * (-ty3 + 2 * ty2 - ty);
-        wy[1] = 0.5f * (3 * ty3 - 5 * ty2 + 2);
-        wy[2] = 0.5f * (-3 * ty3 + 4 * ty2 + ty);
-        wy[3] = 0.5f * (ty3 - ty2);
-        float acc = 0.f;
-        for (int j = 0; j < 4; ++j) {
-          const float* row = src.ptr<float>(iy - 1 + j) + ix - 1;
-          acc += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
-        }
-        out[x] = acc;
-      }
-    }
-  });
-}
-
 /** Remap maps of a row shift: mapx = x + x_offset - d(x, y), mapy = y + v(x, y) (v empty: 0). */
 void rowShiftMaps(const cv::Mat& d, const cv::Mat& v, int x_offset, cv::Mat& mapx, cv::Mat& mapy) {
   mapx.create(d.size(), CV_32F);
@@ -229,6 +186,101 @@ cv::Mat followSlant(const cv::Mat& l8, const cv::Mat& r8, const cv::Mat& dc, con
   return out;
 }
 
+/**
+ * Bicubic resampling with the Catmull-Rom kernel (a = -0.5, the interpolating cubic of least phase error)
+ * at exact float positions. cv::remap's INTER_CUBIC uses a = -0.75 and quantises positions to 1/32 px:
+ * both bias a sub-pixel fit by a few hundredths of a pixel depending on the fractional disparity.
+ */
+inline void catmullRomWeights(float t, float w[4]) {
+  const float t2 = t * t, t3 = t2 * t;
+  w[0] = 0.5f * (-t3 + 2 * t2 - t);
+  w[1] = 0.5f * (3 * t3 - 5 * t2 + 2);
+  w[2] = 0.5f * (-3 * t3 + 4 * t2 + t);
+  w[3] = 0.5f * (t3 - t2);
+}
+
+/** src (CV_32F) at (ix - 1 ... ix + 2) x (iy - 1 ... iy + 2) weighted by wx, wy. */
+inline float catmullRomAt(const cv::Mat& src, int ix, int iy, const float wx[4], const float wy[4]) {
+  float acc = 0.f;
+  for (int j = 0; j < 4; ++j) {
+    const float* row = src.ptr<float>(iy - 1 + j) + ix - 1;
+    acc += wy[j] * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
+  }
+  return acc;
+}
+
+/** f(y) for every row y in [0, rows), rows in parallel stripes. */
+template <class F>
+void forRows(int rows, const F& f) {
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& r) {
+    for (int y = r.start; y < r.end; ++y) f(y);
+  });
+}
+
+/** The normalised pair and its gradients at one level (L may be a crop starting x_offset columns in). */
+struct LevelImages {
+  cv::Mat L, R, Lx, Ly, Rx, Ry;
+  int x_offset = 0;
+};
+
+/** The terms of the local fit at the current field, per pixel (buffers reused from iteration to iteration). */
+struct FitTerms {
+  cv::Mat rw, e, a, b;         // resampled right image, residual L - Rw, symmetric gradients (e = a delta + b nu)
+  cv::Mat aa, ae, ab, bb, be;  // their products (ab, bb, be with the vertical fit only)
+};
+
+/**
+ * Resamples the right image and its gradients (Catmull-Rom) where each left pixel looks under the field (d, v):
+ * x_r = x + x_offset - d, y_r = y + v (0 outside the image), and forms the fit's terms in the same pass.
+ * Symmetric gradients (mean of both images): no first-order bias from using one image's gradient; the right
+ * gradient, resampled into left coordinates, is scaled by the horizontal compression 1 - dd/dx (`slope_x`).
+ * L = Rw(x - delta, y + nu) ~ Rw - gx delta + gy nu  =>  e = a delta + b nu, a = -gx, b = gy.
+ */
+void fitTerms(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, const cv::Mat& slope_x, bool vertical, FitTerms& t) {
+  const cv::Size sz = im.L.size();
+  for (cv::Mat* m : {&t.rw, &t.e, &t.a, &t.b, &t.aa, &t.ae}) m->create(sz, CV_32F);
+  if (vertical)
+    for (cv::Mat* m : {&t.ab, &t.bb, &t.be}) m->create(sz, CV_32F);
+  const int W = im.R.cols, H = im.R.rows;
+  forRows(sz.height, [&](int y) {
+    const float *dp = d.ptr<float>(y), *vp = v.ptr<float>(y), *sx = slope_x.ptr<float>(y);
+    const float *l = im.L.ptr<float>(y), *lx = im.Lx.ptr<float>(y), *ly = im.Ly.ptr<float>(y);
+    float *rw = t.rw.ptr<float>(y), *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *b = t.b.ptr<float>(y);
+    float *aa = t.aa.ptr<float>(y), *ae = t.ae.ptr<float>(y);
+    float *ab = vertical ? t.ab.ptr<float>(y) : nullptr, *bb = vertical ? t.bb.ptr<float>(y) : nullptr,
+          *be = vertical ? t.be.ptr<float>(y) : nullptr;
+    for (int x = 0; x < sz.width; ++x) {
+      const float fx = static_cast<float>(x + im.x_offset) - dp[x], fy = static_cast<float>(y) + vp[x];
+      const int ix = static_cast<int>(std::floor(fx)), iy = static_cast<int>(std::floor(fy));
+      float r = 0.f, rx = 0.f, ry = 0.f;
+      if (!(ix < 1 || iy < 1 || ix >= W - 2 || iy >= H - 2)) {
+        float wx[4], wy[4];
+        catmullRomWeights(fx - ix, wx);
+        catmullRomWeights(fy - iy, wy);
+        r = catmullRomAt(im.R, ix, iy, wx, wy);
+        rx = catmullRomAt(im.Rx, ix, iy, wx, wy);
+        if (vertical) ry = catmullRomAt(im.Ry, ix, iy, wx, wy);
+      }
+      rw[x] = r;
+      e[x] = l[x] - r;
+      a[x] = -0.5f * (lx[x] + rx * (1.0f - sx[x]));
+      b[x] = 0.5f * (ly[x] + ry);
+      aa[x] = a[x] * a[x];
+      ae[x] = a[x] * e[x];
+      if (vertical) {
+        ab[x] = a[x] * b[x];
+        bb[x] = b[x] * b[x];
+        be[x] = b[x] * e[x];
+      }
+    }
+  });
+}
+
+/** Box mean over `win` (reflected border), into dst. */
+void boxMean(const cv::Mat& src, cv::Mat& dst, const cv::Size& win) {
+  cv::boxFilter(src, dst, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+}
+
 /** Result of the local fit at one level. */
 struct Refined {
   cv::Mat d, v;            // disparity (crop coordinates: x_l - x_r') and vertical shift
@@ -239,23 +291,106 @@ struct Refined {
 };
 
 /**
+ * The fit's statistics at its final field: the Gauss-Newton sigma (inflated for correlated residuals), the
+ * normalised correlation at full resolution and low-passed over a doubled window, and the texture (saa).
+ */
+void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, const cv::Mat& slope_x, int window,
+                     FitTerms& t, Refined& out) {
+  const cv::Size win(window, window), sz = im.L.size();
+  fitTerms(im, d, v, slope_x, false, t);
+  // Neighbouring residuals (and gradients) are correlated (optics blur, interpolation), so the window holds
+  // fewer independent samples than pixels. With lag-1 correlations rho_e of the residual and rho_a of the
+  // gradient, an AR(1) model of their product phi = rho_e rho_a inflates the variance by
+  // (1 + phi) / (1 - phi) per direction. Products with the right / lower neighbour (reflected at the border).
+  cv::Mat eh(sz, CV_32F), ev(sz, CV_32F), ah(sz, CV_32F), av(sz, CV_32F), ee(sz, CV_32F), ll(sz, CV_32F), rr(sz, CV_32F),
+      lr(sz, CV_32F);
+  forRows(sz.height, [&](int y) {
+    const int yn = std::min(y + 1, sz.height - 1);
+    const float *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *en = t.e.ptr<float>(yn), *an = t.a.ptr<float>(yn);
+    const float *l = im.L.ptr<float>(y), *r = t.rw.ptr<float>(y);
+    float *peh = eh.ptr<float>(y), *pev = ev.ptr<float>(y), *pah = ah.ptr<float>(y), *pav = av.ptr<float>(y);
+    float *pee = ee.ptr<float>(y), *pll = ll.ptr<float>(y), *prr = rr.ptr<float>(y), *plr = lr.ptr<float>(y);
+    for (int x = 0; x < sz.width; ++x) {
+      const int xn = std::min(x + 1, sz.width - 1);
+      peh[x] = e[x] * e[xn];
+      pah[x] = a[x] * a[xn];
+      pev[x] = e[x] * en[x];
+      pav[x] = a[x] * an[x];
+      pee[x] = e[x] * e[x];
+      pll[x] = l[x] * l[x];
+      prr[x] = r[x] * r[x];
+      plr[x] = l[x] * r[x];
+    }
+  });
+  cv::Mat saa;
+  {
+    std::vector<std::function<void()>> boxes{[&] { boxMean(t.aa, saa, win); }};
+    for (cv::Mat* m : {&eh, &ev, &ah, &av, &ee, &ll, &rr, &lr}) boxes.emplace_back([m, &win] { boxMean(*m, *m, win); });
+    runTasks(boxes);
+  }
+  {
+    // the low-passed views, compared over a doubled window
+    cv::Mat lb, rb;
+    runTasks({[&] { cv::GaussianBlur(im.L, lb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); },
+              [&] { cv::GaussianBlur(t.rw, rb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); }});
+    forRows(sz.height, [&](int y) {
+      const float *p = lb.ptr<float>(y), *q = rb.ptr<float>(y);
+      float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
+      for (int x = 0; x < sz.width; ++x) {
+        a[x] = p[x] * p[x];
+        b[x] = q[x] * q[x];
+        c[x] = p[x] * q[x];
+      }
+    });
+    const cv::Size win2(2 * window + 1, 2 * window + 1);
+    runTasks({[&] { boxMean(t.aa, t.aa, win2); }, [&] { boxMean(t.ae, t.ae, win2); }, [&] { boxMean(t.b, t.b, win2); }});
+    out.corr_smooth.create(sz, CV_32F);
+    forRows(sz.height, [&](int y) {
+      const float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
+      float* o = out.corr_smooth.ptr<float>(y);
+      for (int x = 0; x < sz.width; ++x) o[x] = c[x] / std::max(std::sqrt(a[x] * b[x]), 1e-8f);
+    });
+  }
+  const double n = static_cast<double>(window) * window;
+  out.sigma.create(sz, CV_32F);
+  out.corr.create(sz, CV_32F);
+  out.texture = saa;
+  forRows(sz.height, [&](int y) {
+    const float *p = saa.ptr<float>(y), *q = ee.ptr<float>(y), *l = ll.ptr<float>(y), *r = rr.ptr<float>(y), *c = lr.ptr<float>(y);
+    const float *neh = eh.ptr<float>(y), *nev = ev.ptr<float>(y), *nah = ah.ptr<float>(y), *nav = av.ptr<float>(y);
+    float* sg = out.sigma.ptr<float>(y);
+    float* cr = out.corr.ptr<float>(y);
+    for (int x = 0; x < sz.width; ++x) {
+      // lag-1 correlations: the boxed products over the boxed squares (e^2: q, a^2: p)
+      const float fx = (neh[x] / (q[x] + 1e-12f)) * (nah[x] / (p[x] + 1e-12f));
+      const float fy = (nev[x] / (q[x] + 1e-12f)) * (nav[x] / (p[x] + 1e-12f));
+      const double ax = std::min(0.95, std::max(0.0, static_cast<double>(fx)));
+      const double ay = std::min(0.95, std::max(0.0, static_cast<double>(fy)));
+      const double inflate = (1 + ax) / (1 - ax) * (1 + ay) / (1 - ay);
+      sg[x] = p[x] > 1e-8f ? static_cast<float>(std::sqrt(inflate * q[x] / ((n - 1.0) * p[x]))) : kNaN;
+      const float den = std::sqrt(l[x] * r[x]);
+      cr[x] = den > 1e-8f ? c[x] / den : 0.f;
+    }
+  });
+}
+
+/**
  * Iterative local correlation fit: left L, right R (both normalised, same size), initial d and v.
  * Model: L(x, y) = R(x + x_offset - d, y + v) (L may be a crop of the left image starting x_offset columns
  * in). Each iteration resamples R (Catmull-Rom) at the current field.
  */
 Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d, cv::Mat v, int window, int iterations,
                     bool fit_vertical, bool final_stats) {
-  const cv::Size win(window, window);
-  cv::Mat Rx, Ry, Lx, Ly;
-  cv::Sobel(R, Rx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);  // central difference, smoothed
-  cv::Sobel(R, Ry, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
-  cv::Sobel(L, Lx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
-  cv::Sobel(L, Ly, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
-  cv::Mat mapx(L.size(), CV_32F), mapy(L.size(), CV_32F);
-  cv::Mat Rw, Rxw, Ryw, e, a, b, saa, sab, sbb, sae, sbe;
+  const cv::Size win(window, window), sz = L.size();
+  LevelImages im;
+  im.L = L;
+  im.R = R;
+  im.x_offset = x_offset;
+  cv::Sobel(R, im.Rx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);  // central difference, smoothed
+  cv::Sobel(R, im.Ry, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
+  cv::Sobel(L, im.Lx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
+  cv::Sobel(L, im.Ly, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT);
   const int big = std::max(3, 4 * window + 1) | 1;  // the vertical shift is a smooth field: averaged widely
-  // where each left pixel looks in the right image under the current field
-  auto fillMaps = [&]() { rowShiftMaps(d, v, x_offset, mapx, mapy); };
   // Slant of the disparity field (px per px), from the starting field smoothed over about a window: a window's
   // answer is referred to its centre along this slant (see below), and the right image's gradient, resampled
   // into left coordinates, is scaled by the horizontal compression 1 - dd/dx.
@@ -265,44 +400,47 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     cv::GaussianBlur(d, ds, cv::Size(), 0.5 * window, 0.5 * window, cv::BORDER_REPLICATE);
     cv::Sobel(ds, slope_x, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
     cv::Sobel(ds, slope_y, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
-    slope_x = cv::min(cv::max(slope_x, -2.0), 0.9);  // 1 - dd/dx > 0 on any surface both cameras see
-    slope_y = cv::min(cv::max(slope_y, -2.0), 2.0);
+    forRows(sz.height, [&](int y) {
+      float *sx = slope_x.ptr<float>(y), *sy = slope_y.ptr<float>(y);
+      for (int x = 0; x < sz.width; ++x) {
+        sx[x] = std::min(std::max(sx[x], -2.0f), 0.9f);  // 1 - dd/dx > 0 on any surface both cameras see
+        sy[x] = std::min(std::max(sy[x], -2.0f), 2.0f);
+      }
+    });
     ramp.create(1, window, CV_32F);
     ones = cv::Mat(1, window, CV_32F, cv::Scalar(1.0 / window));
     for (int i = 0; i < window; ++i) ramp.at<float>(0, i) = static_cast<float>(i - window / 2) / window;
   }
+  FitTerms t;
+  cv::Mat saa, sae, sab, sbb, sbe, sad, mx, my, nu(sz, CV_32F);
   for (int it = 0; it < iterations; ++it) {
-    fillMaps();
-    remapCatmullRom(R, mapx, mapy, Rw);
-    remapCatmullRom(Rx, mapx, mapy, Rxw);
-    remapCatmullRom(Ry, mapx, mapy, Ryw);
-    e = L - Rw;
-    // Symmetric gradients (mean of both images): no first-order bias from using one image's gradient.
-    // L = Rw(x - delta, y + nu) ~ Rw - gx delta + gy nu  =>  e = a delta + b nu, a = -gx, b = gy.
-    Rxw = Rxw.mul(1.0 - slope_x);
-    a = -0.5 * (Lx + Rxw);
-    b = 0.5 * (Ly + Ryw);
-    cv::boxFilter(a.mul(a), saa, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    cv::boxFilter(a.mul(e), sae, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    fitTerms(im, d, v, slope_x, fit_vertical, t);
     if (fit_vertical) {
-      cv::boxFilter(a.mul(b), sab, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::boxFilter(b.mul(b), sbb, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::boxFilter(b.mul(e), sbe, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::Mat nu(L.size(), CV_32F);
-      for (int y = 0; y < L.rows; ++y) {
+      runTasks({[&] { boxMean(t.aa, saa, win); }, [&] { boxMean(t.ae, sae, win); }, [&] { boxMean(t.ab, sab, win); },
+                [&] { boxMean(t.bb, sbb, win); }, [&] { boxMean(t.be, sbe, win); }});
+      forRows(sz.height, [&](int y) {
         const float *p = saa.ptr<float>(y), *q = sab.ptr<float>(y), *r = sbb.ptr<float>(y), *s = sae.ptr<float>(y),
-                    *t = sbe.ptr<float>(y);
+                    *w = sbe.ptr<float>(y);
         float* n = nu.ptr<float>(y);
-        for (int x = 0; x < L.cols; ++x) {
+        for (int x = 0; x < sz.width; ++x) {
           const float det = p[x] * r[x] - q[x] * q[x];
-          n[x] = det > 1e-8f ? (p[x] * t[x] - q[x] * s[x]) / det : 0.f;
+          n[x] = det > 1e-8f ? (p[x] * w[x] - q[x] * s[x]) / det : 0.f;
           n[x] = std::max(-0.5f, std::min(0.5f, n[x]));
         }
-      }
+      });
       cv::boxFilter(nu, nu, CV_32F, cv::Size(big, big), cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      v += nu;
       // the horizontal fit given the smoothed vertical update
-      cv::boxFilter(a.mul(e - b.mul(nu)), sae, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      forRows(sz.height, [&](int y) {
+        const float *n = nu.ptr<float>(y), *a = t.a.ptr<float>(y), *e = t.e.ptr<float>(y), *b = t.b.ptr<float>(y);
+        float *vp = v.ptr<float>(y), *ae = t.ae.ptr<float>(y);
+        for (int x = 0; x < sz.width; ++x) {
+          vp[x] += n[x];
+          ae[x] = a[x] * (e[x] - b[x] * n[x]);
+        }
+      });
+      boxMean(t.ae, sae, win);
+    } else {
+      runTasks({[&] { boxMean(t.aa, saa, win); }, [&] { boxMean(t.ae, sae, win); }});
     }
     // Each window's estimate linearises around its neighbours' current values, so the window's answer is
     // its a^2-weighted mean of d plus the update (not the pixel's own d plus the update: with a box window
@@ -310,93 +448,29 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     // On a slanted field that mean belongs to the window's texture centroid, not to its centre: where the
     // texture sits off-centre (a freckle near one side) it is moved back along the slant,
     // d(centre) = mean - slope . (centroid - centre); mx, my = the a^2-weighted mean offsets (times saa).
-    cv::Mat sad;
-    const cv::Mat aa = a.mul(a);
-    cv::boxFilter(aa.mul(d), sad, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    {
-      cv::Mat mx, my;
-      cv::sepFilter2D(aa, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
-      cv::sepFilter2D(aa, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
-      sad -= slope_x.mul(mx) + slope_y.mul(my);
-    }
-    for (int y = 0; y < L.rows; ++y) {
-      const float* p = saa.ptr<float>(y);
-      const float* s = sae.ptr<float>(y);
-      const float* m = sad.ptr<float>(y);
+    runTasks({[&] { cv::sepFilter2D(t.aa, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0, cv::BORDER_REFLECT); },
+              [&] { cv::sepFilter2D(t.aa, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0, cv::BORDER_REFLECT); },
+              [&] {
+                cv::multiply(t.aa, d, t.ab);  // aa d (t.ab is free here)
+                boxMean(t.ab, sad, win);
+              }});
+    forRows(sz.height, [&](int y) {
+      const float *p = saa.ptr<float>(y), *s = sae.ptr<float>(y), *m = sad.ptr<float>(y), *ox = mx.ptr<float>(y),
+                  *oy = my.ptr<float>(y), *sx = slope_x.ptr<float>(y), *sy = slope_y.ptr<float>(y);
       float* dp = d.ptr<float>(y);
-      for (int x = 0; x < L.cols; ++x) {
+      for (int x = 0; x < sz.width; ++x) {
         if (p[x] > 1e-8f) {
-          const float target = (m[x] + s[x]) / p[x];
+          const float centred = m[x] - (sx[x] * ox[x] + sy[x] * oy[x]);
+          const float target = (centred + s[x]) / p[x];
           dp[x] += std::max(-1.f, std::min(1.f, target - dp[x]));
         }
       }
-    }
+    });
   }
   Refined out;
   out.d = d;
   out.v = v;
-  if (final_stats) {
-    // Residual after the last update, normalised correlation and the Gauss-Newton sigma.
-    fillMaps();
-    remapCatmullRom(R, mapx, mapy, Rw);
-    remapCatmullRom(Rx, mapx, mapy, Rxw);
-    Rxw = Rxw.mul(1.0 - slope_x);
-    e = L - Rw;
-    a = -0.5 * (Lx + Rxw);
-    cv::Mat see, sll, srr, slr;
-    cv::boxFilter(a.mul(a), saa, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    cv::boxFilter(e.mul(e), see, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    cv::boxFilter(L.mul(L), sll, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    cv::boxFilter(Rw.mul(Rw), srr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    cv::boxFilter(L.mul(Rw), slr, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-    // Neighbouring residuals (and gradients) are correlated (optics blur, interpolation), so the window holds
-    // fewer independent samples than pixels. With lag-1 correlations rho_e of the residual and rho_a of the
-    // gradient, an AR(1) model of their product phi = rho_e rho_a inflates the variance by
-    // (1 + phi) / (1 - phi) per direction.
-    auto lag1 = [&](const cv::Mat& m, bool horizontal) {
-      cv::Mat shifted, prod, num, den;
-      const cv::Mat kernel = horizontal ? (cv::Mat_<float>(1, 3) << 0, 0, 1) : (cv::Mat_<float>(3, 1) << 0, 0, 1);
-      cv::filter2D(m, shifted, CV_32F, kernel, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);  // m(x + 1) or m(y + 1)
-      cv::boxFilter(m.mul(shifted), num, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::boxFilter(m.mul(m), den, CV_32F, win, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::Mat r;
-      cv::divide(num, den + 1e-12f, r);
-      return r;
-    };
-    const cv::Mat phx = lag1(e, true).mul(lag1(a, true)), phy = lag1(e, false).mul(lag1(a, false));
-    {
-      cv::Mat lb, rb, sl2, sr2, slr2;
-      cv::GaussianBlur(L, lb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT);
-      cv::GaussianBlur(Rw, rb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT);
-      const cv::Size win2(2 * window + 1, 2 * window + 1);
-      cv::boxFilter(lb.mul(lb), sl2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::boxFilter(rb.mul(rb), sr2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::boxFilter(lb.mul(rb), slr2, CV_32F, win2, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
-      cv::Mat den;
-      cv::sqrt(sl2.mul(sr2), den);
-      cv::divide(slr2, cv::max(den, 1e-8), out.corr_smooth);
-    }
-    const double n = static_cast<double>(window) * window;
-    out.sigma.create(L.size(), CV_32F);
-    out.corr.create(L.size(), CV_32F);
-    out.texture = saa;
-    for (int y = 0; y < L.rows; ++y) {
-      const float *p = saa.ptr<float>(y), *q = see.ptr<float>(y), *l = sll.ptr<float>(y), *r = srr.ptr<float>(y),
-                  *c = slr.ptr<float>(y);
-      const float* fx = phx.ptr<float>(y);
-      const float* fy = phy.ptr<float>(y);
-      float* sg = out.sigma.ptr<float>(y);
-      float* cr = out.corr.ptr<float>(y);
-      for (int x = 0; x < L.cols; ++x) {
-        const double ax = std::min(0.95, std::max(0.0, static_cast<double>(fx[x])));
-        const double ay = std::min(0.95, std::max(0.0, static_cast<double>(fy[x])));
-        const double inflate = (1 + ax) / (1 - ax) * (1 + ay) / (1 - ay);
-        sg[x] = p[x] > 1e-8f ? static_cast<float>(std::sqrt(inflate * q[x] / ((n - 1.0) * p[x]))) : kNaN;
-        const float den = std::sqrt(l[x] * r[x]);
-        cr[x] = den > 1e-8f ? c[x] / den : 0.f;
-      }
-    }
-  }
+  if (final_stats) finalStatistics(im, d, v, slope_x, window, t, out);
   return out;
 }
 
@@ -545,7 +619,9 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
         d = du * 2.0;
         v = vu * 2.0;
       }
-      const cv::Mat Ln = normaliseLocal(pl[l], norm_sigma)(crop), Rn = normaliseLocal(pr[l], norm_sigma);
+      // the two views normalised side by side (two tasks: each filter runs on one core)
+      cv::Mat Ln, Rn;
+      runTasks({[&] { Ln = normaliseLocal(pl[l], norm_sigma)(crop); }, [&] { Rn = normaliseLocal(pr[l], norm_sigma); }});
       r = refineLevel(Ln, Rn, cl, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
       d = r.d;
       v = r.v;

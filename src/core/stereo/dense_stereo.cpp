@@ -226,7 +226,7 @@ struct LevelImages {
 /** The terms of the local fit at the current field, per pixel (buffers reused from iteration to iteration). */
 struct FitTerms {
   cv::Mat rw, e, a, b;         // resampled right image, residual L - Rw, symmetric gradients (e = a delta + b nu)
-  cv::Mat aa, ae, ab, bb, be;  // their products (ab, bb, be with the vertical fit only)
+  cv::Mat aa, ae, ab, bb, be;  // their products (b, ab, bb, be with the vertical fit only)
 };
 
 /**
@@ -238,14 +238,14 @@ struct FitTerms {
  */
 void fitTerms(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, const cv::Mat& slope_x, bool vertical, FitTerms& t) {
   const cv::Size sz = im.L.size();
-  for (cv::Mat* m : {&t.rw, &t.e, &t.a, &t.b, &t.aa, &t.ae}) m->create(sz, CV_32F);
+  for (cv::Mat* m : {&t.rw, &t.e, &t.a, &t.aa, &t.ae}) m->create(sz, CV_32F);
   if (vertical)
-    for (cv::Mat* m : {&t.ab, &t.bb, &t.be}) m->create(sz, CV_32F);
+    for (cv::Mat* m : {&t.b, &t.ab, &t.bb, &t.be}) m->create(sz, CV_32F);
   const int W = im.R.cols, H = im.R.rows;
   forRows(sz.height, [&](int y) {
     const float *dp = d.ptr<float>(y), *vp = v.ptr<float>(y), *sx = slope_x.ptr<float>(y);
-    const float *l = im.L.ptr<float>(y), *lx = im.Lx.ptr<float>(y), *ly = im.Ly.ptr<float>(y);
-    float *rw = t.rw.ptr<float>(y), *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *b = t.b.ptr<float>(y);
+    const float *l = im.L.ptr<float>(y), *lx = im.Lx.ptr<float>(y), *ly = vertical ? im.Ly.ptr<float>(y) : nullptr;
+    float *rw = t.rw.ptr<float>(y), *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *b = vertical ? t.b.ptr<float>(y) : nullptr;
     float *aa = t.aa.ptr<float>(y), *ae = t.ae.ptr<float>(y);
     float *ab = vertical ? t.ab.ptr<float>(y) : nullptr, *bb = vertical ? t.bb.ptr<float>(y) : nullptr,
           *be = vertical ? t.be.ptr<float>(y) : nullptr;
@@ -264,10 +264,10 @@ void fitTerms(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, const c
       rw[x] = r;
       e[x] = l[x] - r;
       a[x] = -0.5f * (lx[x] + rx * (1.0f - sx[x]));
-      b[x] = 0.5f * (ly[x] + ry);
       aa[x] = a[x] * a[x];
       ae[x] = a[x] * e[x];
       if (vertical) {
+        b[x] = 0.5f * (ly[x] + ry);
         ab[x] = a[x] * b[x];
         bb[x] = b[x] * b[x];
         be[x] = b[x] * e[x];
@@ -333,6 +333,7 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
     cv::Mat lb, rb;
     runTasks({[&] { cv::GaussianBlur(im.L, lb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); },
               [&] { cv::GaussianBlur(t.rw, rb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); }});
+    t.b.create(sz, CV_32F);
     forRows(sz.height, [&](int y) {
       const float *p = lb.ptr<float>(y), *q = rb.ptr<float>(y);
       float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
@@ -470,7 +471,12 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   Refined out;
   out.d = d;
   out.v = v;
-  if (final_stats) finalStatistics(im, d, v, slope_x, window, t, out);
+  if (final_stats) {
+    // the iterations' buffers go back to the heap first: the statistics' own buffers reuse them (a 13-megapixel
+    // frame's peak memory, and with it the pages the kernel must fault in and clear, is lower)
+    for (cv::Mat* m : {&saa, &sae, &sab, &sbb, &sbe, &sad, &mx, &my, &nu, &t.ab, &t.bb, &t.be, &im.Ly, &im.Ry, &slope_y}) m->release();
+    finalStatistics(im, d, v, slope_x, window, t, out);
+  }
   return out;
 }
 

@@ -250,15 +250,28 @@ inline Eigen::Vector3d quadricGradient(const Vec10& t, const Eigen::Vector3d& y)
 
 /** Weighted Taubin fit of an implicit quadric (normalised coordinates): min sum w F^2 / sum w |grad F|^2. */
 bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<double>& w, Vec10* theta) {
-  Eigen::Matrix<double, 10, 10> M = Eigen::Matrix<double, 10, 10>::Zero(), N = Eigen::Matrix<double, 10, 10>::Zero();
+  using Mat10 = Eigen::Matrix<double, 10, 10>;
+  // sums over fixed chunks of points in parallel, added in chunk order: the same result on any number of threads
+  constexpr std::size_t kChunk = 8192;
+  const std::size_t chunks = (ys.size() + kChunk - 1) / kChunk;
+  std::vector<Mat10, Eigen::aligned_allocator<Mat10>> Ms(chunks, Mat10::Zero()), Ns(chunks, Mat10::Zero());
+  std::vector<double> wss(chunks, 0.0);
+  forEachIndex(chunks, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(ys.size(), (c + 1) * kChunk); ++i) {
+      if (w[i] <= 0) continue;
+      const Vec10 m = monomials(ys[i]);
+      const Eigen::Matrix<double, 10, 3> J = monomialGradients(ys[i]);
+      Ms[c].noalias() += w[i] * m * m.transpose();
+      Ns[c].noalias() += (w[i] * J).lazyProduct(J.transpose());  // coefficient-wise: a GEMM call per point costs more
+      wss[c] += w[i];
+    }
+  });
+  Mat10 M = Mat10::Zero(), N = Mat10::Zero();
   double ws = 0;
-  for (std::size_t i = 0; i < ys.size(); ++i) {
-    if (w[i] <= 0) continue;
-    const Vec10 m = monomials(ys[i]);
-    const Eigen::Matrix<double, 10, 3> J = monomialGradients(ys[i]);
-    M.noalias() += w[i] * m * m.transpose();
-    N.noalias() += (w[i] * J).lazyProduct(J.transpose());  // coefficient-wise: a GEMM call per point costs more
-    ws += w[i];
+  for (std::size_t c = 0; c < chunks; ++c) {
+    M += Ms[c];
+    N += Ns[c];
+    ws += wss[c];
   }
   if (ws <= 0) return false;
   // eliminate the constant term (no gradient): c = -M_c9 theta' / M_99
@@ -296,7 +309,7 @@ bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double m
   for (std::size_t i = 0; i < pts.size(); ++i) ys[i] = (pts[i] - c) / sc;
   // start: the current reference's residuals (the RANSAC plane's, or the previous quadric's) with a wide cut-off
   std::vector<double> w(pts.size()), r(pts.size());
-  for (std::size_t i = 0; i < pts.size(); ++i) r[i] = ref->height(pts[i]);
+  forEachIndex(pts.size(), [&](std::size_t i) { r[i] = ref->height(pts[i]); });
   for (int it = 0; it < 10; ++it) {
     std::vector<double> a(r.size());
     for (std::size_t i = 0; i < r.size(); ++i) a[i] = std::fabs(r[i]);
@@ -317,7 +330,7 @@ bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double m
       vote += w[i] * (g.dot(-pts[i]) > 0 ? 1 : -1);
     }
     cur.q_sign = vote >= 0 ? 1.0 : -1.0;
-    for (std::size_t i = 0; i < pts.size(); ++i) r[i] = cur.height(pts[i]);
+    forEachIndex(pts.size(), [&](std::size_t i) { r[i] = cur.height(pts[i]); });
   }
   double s2 = 0;
   int k = 0;
@@ -353,7 +366,7 @@ bool fitReference(const cv::Mat& xyz, const cv::Mat& use, const std::string& mod
   std::vector<double> w(pts.size(), 1.0), r(pts.size());
   ReferenceSurface cur = *ref;
   for (int it = 0; it < 8; ++it) {
-    for (std::size_t i = 0; i < pts.size(); ++i) r[i] = cur.height(pts[i]);
+    forEachIndex(pts.size(), [&](std::size_t i) { r[i] = cur.height(pts[i]); });
     std::vector<double> a(r.size());
     for (std::size_t i = 0; i < r.size(); ++i) a[i] = std::fabs(r[i]);
     std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());

@@ -136,7 +136,10 @@ struct Plaque {
   double mean_height_sigma = 0;  //!< m, standard error of the mean height (from the per-point sigmas)
   int pasi_class = 0;
   int pixels = 0;
-  double measured_fraction = 0;  //!< share of the plaque's pixels that have a height (the rest: matcher gaps)
+  double measured_fraction = 0;  //!< share of the plaque's footprint that has a height (the rest: matcher gaps)
+  /** share of the footprint's outline that borders unmeasured skin (not a step edge's gap with measured skin
+   *  across it): above 0.1 the plaque may extend there (a warning says so), and its area is what was measured */
+  double outline_unmeasured = 0;
   double volume = 0;           //!< m^3, sum of height x footprint over the measured pixels / measured_fraction
   cv::Rect bbox;               //!< in the image
 };

@@ -62,6 +62,9 @@ int pasiClass(double height, const std::vector<double>& boundaries) {
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+/** A plaque whose outline borders unmeasured skin along more than this share may extend beyond what was
+ *  measured: a warning says so. */
+constexpr double kOpenOutline = 0.1;
 
 inline bool known(const cv::Vec3f& p) { return !std::isnan(p[0]); }
 
@@ -626,6 +629,94 @@ double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_heig
 }
 
 
+/** Pixels of `mask`'s holes: zero pixels not reachable from the border through zero pixels (8-bit masks). */
+cv::Mat holesOf(const cv::Mat& mask) {
+  cv::Mat flood;
+  cv::copyMakeBorder(mask, flood, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
+  cv::floodFill(flood, cv::Point(0, 0), 128);
+  return flood(cv::Rect(1, 1, mask.cols, mask.rows)) == 0;
+}
+
+/**
+ * The footprint of a plaque's region (`mask`, in `box` of the image): the pixels that belong to the plaque by
+ * what was measured. The region is drawn on the height map as filled across the matcher's gaps, so part of it
+ * may lie in a gap. Such a pixel counts
+ * - inside the plaque: between its measured pixels (closing over up to `max_gap` px, and holes), e.g. a strip
+ *   the matcher could not match across it;
+ * - at a step edge: within a gap at most `max_gap` px across between the plaque's measured pixels and measured
+ *   skin below `edge` (the half-height boundary then lies in the gap, as the region has it);
+ * but not where the gap opens onto unmeasured skin (the band's edge, beyond a silhouette): there the filled
+ * heights only continue the plaque's edge, and the plaque's extent is unknown.
+ * `known`: measured pixels of the image; `h`: heights (image; m).
+ */
+struct Footprint {
+  cv::Mat pixels;       //!< CV_8U in the region's box
+  double open = 0;      //!< share of the pixels just outside it that are unmeasured and not a step edge's gap
+};
+
+Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::Mat& known, const cv::Mat& h, double edge, int max_gap) {
+  const cv::Rect win = cv::Rect(box.x - max_gap, box.y - max_gap, box.width + 2 * max_gap, box.height + 2 * max_gap) &
+                       cv::Rect(0, 0, known.cols, known.rows);
+  const cv::Rect inner = box - win.tl();
+  cv::Mat m = cv::Mat::zeros(win.size(), CV_8U);
+  mask.copyTo(m(inner));
+  const cv::Mat plaque = m & known(win);
+  const cv::Mat healthy = known(win) & ~m & (h(win) < edge);
+  cv::Mat closed, dp, dh;
+  const int r = std::max(1, max_gap / 2);
+  cv::morphologyEx(plaque, closed, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)),
+                   cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+  closed |= holesOf(closed);
+  // distance to the nearest measured plaque / healthy pixel, and which pixel that is
+  cv::Mat lp, lh;
+  cv::distanceTransform(~plaque, dp, lp, cv::DIST_L2, cv::DIST_MASK_5, cv::DIST_LABEL_PIXEL);
+  cv::distanceTransform(~healthy, dh, lh, cv::DIST_L2, cv::DIST_MASK_5, cv::DIST_LABEL_PIXEL);
+  auto where = [](const cv::Mat& src, const cv::Mat& labels) {  // label -> its pixel (each source pixel has its own)
+    std::vector<cv::Point> at(1);
+    for (int y = 0; y < src.rows; ++y)
+      for (int x = 0; x < src.cols; ++x)
+        if (src.at<uchar>(y, x)) {
+          const int l = labels.at<int>(y, x);
+          if (l >= static_cast<int>(at.size())) at.resize(static_cast<std::size_t>(l) + 1);
+          at[static_cast<std::size_t>(l)] = cv::Point(x, y);
+        }
+    return at;
+  };
+  const std::vector<cv::Point> at_p = where(plaque, lp), at_h = where(healthy, lh);
+  // in a step edge's gap: the plaque on one side, healthy skin on the other (not round a corner of the plaque)
+  auto across = [&](int x, int y) {
+    if (dp.at<float>(y, x) + dh.at<float>(y, x) > max_gap) return false;
+    const int a = lp.at<int>(y, x), b = lh.at<int>(y, x);
+    if (a <= 0 || b <= 0 || a >= static_cast<int>(at_p.size()) || b >= static_cast<int>(at_h.size())) return false;
+    const cv::Point2d u = at_p[static_cast<std::size_t>(a)] - cv::Point(x, y), v = at_h[static_cast<std::size_t>(b)] - cv::Point(x, y);
+    return u.dot(v) <= 0;  // at least a right angle apart (the gap's sides are ragged)
+  };
+  cv::Mat fp = m & closed;
+  for (int y = 0; y < fp.rows; ++y)
+    for (int x = 0; x < fp.cols; ++x)
+      if (m.at<uchar>(y, x) && !fp.at<uchar>(y, x) && across(x, y)) fp.at<uchar>(y, x) = 255;
+  fp |= holesOf(fp);  // pockets it encloses (a few gap pixels whose nearest measured pixels are not across)
+  // the pixels just outside: measured, in a step edge's gap, next to measured healthy skin, or open (the plaque
+  // may continue there)
+  cv::Mat ring;
+  cv::dilate(fp, ring, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+  ring &= ~fp;
+  int all = 0, open = 0;
+  const cv::Mat kw = known(win);
+  for (int y = 0; y < ring.rows; ++y)
+    for (int x = 0; x < ring.cols; ++x)
+      if (ring.at<uchar>(y, x)) {
+        ++all;
+        // (measured healthy skin a matching window or so away closes it too: the end of a strip the matcher
+        // could not match across the plaque)
+        open += !kw.at<uchar>(y, x) && !across(x, y) && dh.at<float>(y, x) > max_gap / 4;
+      }
+  Footprint out;
+  out.pixels = fp(inner).clone();
+  out.open = all > 0 ? open / static_cast<double>(all) : 0.0;
+  return out;
+}
+
 /** The connected regions (8-connected) of `mask` whose footprint on the reference is at least min_area / 4. */
 cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area) {
   cv::Mat lab, stats, cents;
@@ -982,6 +1073,10 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
         if (final_labels.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // a few pixels of a neighbour
+    // area, share measured, volume and label over the footprint the measurements support (heights: the region's
+    // interior, as before)
+    const Footprint foot = measuredFootprint(mask, box, known_mask, res.height_map, edge, 4 * std::max(1, o.interior_margin_px));
+    const cv::Mat& fp = foot.pixels;
     cv::Mat interior;
     if (o.interior_margin_px > 0) {
       cv::erode(mask, interior, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o.interior_margin_px + 1, 2 * o.interior_margin_px + 1)),
@@ -998,9 +1093,11 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x) {
         if (!mask.at<uchar>(y, x)) continue;
-        ++px;
-        area += A.at<double>(y, x);
         const float h = res.height_map.at<float>(y + box.y, x + box.x);
+        if (fp.at<uchar>(y, x)) {
+          ++px;
+          area += A.at<double>(y, x);
+        }
         if (std::isnan(h)) continue;
         vol += std::max(0.0f, h) * A.at<double>(y, x);
         const cv::Vec3f& q = xyz.at<cv::Vec3f>(y + box.y, x + box.x);
@@ -1075,16 +1172,23 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
     p.pixels = px;
     p.measured_fraction = px > 0 ? nc / static_cast<double>(px) : 0.0;
     p.volume = p.measured_fraction > 0 ? vol / p.measured_fraction : 0.0;
+    p.outline_unmeasured = foot.open;
     if (p.measured_fraction < 0.9)
       res.warnings.push_back("a plaque of " + num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
                              std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
                              ") is only partly measured: " + num(std::round(100 * p.measured_fraction)) +
                              " % of its footprint has a height (its mean and volume rest on that part)");
+    if (p.outline_unmeasured > kOpenOutline)
+      res.warnings.push_back("a plaque of " + num(std::round(area * 1e7) / 10) + " mm^2 at pixel (" +
+                             std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) +
+                             ") borders unmeasured skin along " + num(std::round(100 * p.outline_unmeasured)) +
+                             " % of its outline: it may extend there (its area is what was measured; turn the skin "
+                             "towards the rig to measure all of it)");
     p.bbox = box;
     p.id = static_cast<int>(plaques.size()) + 1;
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
-        if (mask.at<uchar>(y, x)) final_labels.at<int>(y + box.y, x + box.x) = p.id;
+        if (fp.at<uchar>(y, x)) final_labels.at<int>(y + box.y, x + box.x) = p.id;
     plaques.push_back(p);
   }
   // ids in order of decreasing area

@@ -476,7 +476,10 @@ double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, dou
     t.push_back(detectionThreshold(*smoothed, use, 0.0, band));
     const size_t i = t.size() - 1;
     if (t[i] <= 1.5 * min_height) return s[i];
-    if (s[i] >= limit) return limit;  // (s[i] is the limit then: the steps stop at it)
+    if (s[i] >= limit) {
+      if (s[i] != limit) *smoothed = smooth(limit);  // a limit below the 0.5 px start
+      return limit;
+    }
     s.push_back(std::min(limit, s[i] * std::sqrt(2.0)));
   }
 }
@@ -664,8 +667,9 @@ Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::
   const cv::Mat healthy = known(win) & ~m & (h(win) < edge);
   cv::Mat closed, dp, dh;
   const int r = std::max(1, max_gap / 2);
-  cv::morphologyEx(plaque, closed, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)),
-                   cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+  // (default border: the closing's erosion does not eat a plaque touching the image's border)
+  cv::morphologyEx(plaque, closed, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+  closed |= plaque;
   closed |= holesOf(closed);
   // distance to the nearest measured plaque / healthy pixel, and which pixel that is
   cv::Mat lp, lh;
@@ -696,6 +700,7 @@ Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::
     for (int x = 0; x < fp.cols; ++x)
       if (m.at<uchar>(y, x) && !fp.at<uchar>(y, x) && across(x, y)) fp.at<uchar>(y, x) = 255;
   fp |= holesOf(fp);  // pockets it encloses (a few gap pixels whose nearest measured pixels are not across)
+  fp &= m;            // (not a neighbour's pixels, taken out of the region before)
   // the pixels just outside: measured, in a step edge's gap, next to measured healthy skin, or open (the plaque
   // may continue there)
   cv::Mat ring;

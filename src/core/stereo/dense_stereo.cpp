@@ -349,7 +349,12 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
     forRows(sz.height, [&](int y) {
       const float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
       float* o = out.corr_smooth.ptr<float>(y);
-      for (int x = 0; x < sz.width; ++x) o[x] = c[x] / std::max(std::sqrt(a[x] * b[x]), 1e-8f);
+      for (int x = 0; x < sz.width; ++x) {
+        // (box means of squares can round below 0 where the right view is outside the image: NaN -> the floor)
+        float den = std::sqrt(a[x] * b[x]);
+        if (!(den > 1e-8f)) den = 1e-8f;
+        o[x] = c[x] / den;
+      }
     });
   }
   const double n = static_cast<double>(window) * window;

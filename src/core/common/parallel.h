@@ -19,11 +19,12 @@ inline void runTasks(const std::vector<std::function<void()>>& tasks) {
   });
 }
 
-/** f(i) for every i in [0, n), in parallel stripes; each call must write only its own outputs. */
-template <class F>
-void forEachIndex(std::size_t n, const F& f) {
+/** f(i) for every i in [0, n) (an index of points, an image row), in parallel stripes; each call must write
+ *  only its own outputs. */
+template <class Index, class F>
+void forEachIndex(Index n, const F& f) {
   cv::parallel_for_(cv::Range(0, static_cast<int>(n)), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) f(static_cast<std::size_t>(i));
+    for (int i = r.start; i < r.end; ++i) f(static_cast<Index>(i));
   });
 }
 

@@ -1034,13 +1034,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                            (box.y + box.height < xyz.rows && cv::countNonZero(mask.row(box.height - 1)) > 0);
       if (!touches || grow == 3) break;
     }
-    // fill holes: background not reachable from the box border
-    cv::Mat flood;
-    cv::copyMakeBorder(mask, flood, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
-    cv::floodFill(flood, cv::Point(0, 0), 128);
-    for (int y = 0; y < box.height; ++y)
-      for (int x = 0; x < box.width; ++x)
-        if (flood.at<uchar>(y + 1, x + 1) == 0) mask.at<uchar>(y, x) = 255;
+    mask |= holesOf(mask);  // fill holes: background not reachable from the box border
     {
       // A core whose half-height region reaches a plaque drawn already (from a larger core) is that plaque's
       // shoulder (its ramp, a step the matcher blurred, a piece past a gap): no valley below its half height

@@ -209,14 +209,6 @@ inline float catmullRomAt(const cv::Mat& src, int ix, int iy, const float wx[4],
   return acc;
 }
 
-/** f(y) for every row y in [0, rows), rows in parallel stripes. */
-template <class F>
-void forRows(int rows, const F& f) {
-  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& r) {
-    for (int y = r.start; y < r.end; ++y) f(y);
-  });
-}
-
 /** The normalised pair and its gradients at one level (L may be a crop starting x_offset columns in). */
 struct LevelImages {
   cv::Mat L, R, Lx, Ly, Rx, Ry;
@@ -242,7 +234,7 @@ void fitTerms(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, const c
   if (vertical)
     for (cv::Mat* m : {&t.b, &t.ab, &t.bb, &t.be}) m->create(sz, CV_32F);
   const int W = im.R.cols, H = im.R.rows;
-  forRows(sz.height, [&](int y) {
+  forEachIndex(sz.height, [&](int y) {
     const float *dp = d.ptr<float>(y), *vp = v.ptr<float>(y), *sx = slope_x.ptr<float>(y);
     const float *l = im.L.ptr<float>(y), *lx = im.Lx.ptr<float>(y), *ly = vertical ? im.Ly.ptr<float>(y) : nullptr;
     float *rw = t.rw.ptr<float>(y), *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *b = vertical ? t.b.ptr<float>(y) : nullptr;
@@ -304,7 +296,7 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
   // (1 + phi) / (1 - phi) per direction. Products with the right / lower neighbour (reflected at the border).
   cv::Mat eh(sz, CV_32F), ev(sz, CV_32F), ah(sz, CV_32F), av(sz, CV_32F), ee(sz, CV_32F), ll(sz, CV_32F), rr(sz, CV_32F),
       lr(sz, CV_32F);
-  forRows(sz.height, [&](int y) {
+  forEachIndex(sz.height, [&](int y) {
     const int yn = std::min(y + 1, sz.height - 1);
     const float *e = t.e.ptr<float>(y), *a = t.a.ptr<float>(y), *en = t.e.ptr<float>(yn), *an = t.a.ptr<float>(yn);
     const float *l = im.L.ptr<float>(y), *r = t.rw.ptr<float>(y);
@@ -334,7 +326,7 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
     runTasks({[&] { cv::GaussianBlur(im.L, lb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); },
               [&] { cv::GaussianBlur(t.rw, rb, cv::Size(), 1.0, 1.0, cv::BORDER_REFLECT); }});
     t.b.create(sz, CV_32F);
-    forRows(sz.height, [&](int y) {
+    forEachIndex(sz.height, [&](int y) {
       const float *p = lb.ptr<float>(y), *q = rb.ptr<float>(y);
       float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
       for (int x = 0; x < sz.width; ++x) {
@@ -346,7 +338,7 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
     const cv::Size win2(2 * window + 1, 2 * window + 1);
     runTasks({[&] { boxMean(t.aa, t.aa, win2); }, [&] { boxMean(t.ae, t.ae, win2); }, [&] { boxMean(t.b, t.b, win2); }});
     out.corr_smooth.create(sz, CV_32F);
-    forRows(sz.height, [&](int y) {
+    forEachIndex(sz.height, [&](int y) {
       const float *a = t.aa.ptr<float>(y), *b = t.ae.ptr<float>(y), *c = t.b.ptr<float>(y);
       float* o = out.corr_smooth.ptr<float>(y);
       for (int x = 0; x < sz.width; ++x) {
@@ -361,7 +353,7 @@ void finalStatistics(const LevelImages& im, const cv::Mat& d, const cv::Mat& v, 
   out.sigma.create(sz, CV_32F);
   out.corr.create(sz, CV_32F);
   out.texture = saa;
-  forRows(sz.height, [&](int y) {
+  forEachIndex(sz.height, [&](int y) {
     const float *p = saa.ptr<float>(y), *q = ee.ptr<float>(y), *l = ll.ptr<float>(y), *r = rr.ptr<float>(y), *c = lr.ptr<float>(y);
     const float *neh = eh.ptr<float>(y), *nev = ev.ptr<float>(y), *nah = ah.ptr<float>(y), *nav = av.ptr<float>(y);
     float* sg = out.sigma.ptr<float>(y);
@@ -406,7 +398,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     cv::GaussianBlur(d, ds, cv::Size(), 0.5 * window, 0.5 * window, cv::BORDER_REPLICATE);
     cv::Sobel(ds, slope_x, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
     cv::Sobel(ds, slope_y, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REPLICATE);
-    forRows(sz.height, [&](int y) {
+    forEachIndex(sz.height, [&](int y) {
       float *sx = slope_x.ptr<float>(y), *sy = slope_y.ptr<float>(y);
       for (int x = 0; x < sz.width; ++x) {
         sx[x] = std::min(std::max(sx[x], -2.0f), 0.9f);  // 1 - dd/dx > 0 on any surface both cameras see
@@ -424,7 +416,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
     if (fit_vertical) {
       runTasks({[&] { boxMean(t.aa, saa, win); }, [&] { boxMean(t.ae, sae, win); }, [&] { boxMean(t.ab, sab, win); },
                 [&] { boxMean(t.bb, sbb, win); }, [&] { boxMean(t.be, sbe, win); }});
-      forRows(sz.height, [&](int y) {
+      forEachIndex(sz.height, [&](int y) {
         const float *p = saa.ptr<float>(y), *q = sab.ptr<float>(y), *r = sbb.ptr<float>(y), *s = sae.ptr<float>(y),
                     *w = sbe.ptr<float>(y);
         float* n = nu.ptr<float>(y);
@@ -436,7 +428,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
       });
       cv::boxFilter(nu, nu, CV_32F, cv::Size(big, big), cv::Point(-1, -1), true, cv::BORDER_REFLECT);
       // the horizontal fit given the smoothed vertical update
-      forRows(sz.height, [&](int y) {
+      forEachIndex(sz.height, [&](int y) {
         const float *n = nu.ptr<float>(y), *a = t.a.ptr<float>(y), *e = t.e.ptr<float>(y), *b = t.b.ptr<float>(y);
         float *vp = v.ptr<float>(y), *ae = t.ae.ptr<float>(y);
         for (int x = 0; x < sz.width; ++x) {
@@ -460,7 +452,7 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
                 cv::multiply(t.aa, d, t.ab);  // aa d (t.ab is free here)
                 boxMean(t.ab, sad, win);
               }});
-    forRows(sz.height, [&](int y) {
+    forEachIndex(sz.height, [&](int y) {
       const float *p = saa.ptr<float>(y), *s = sae.ptr<float>(y), *m = sad.ptr<float>(y), *ox = mx.ptr<float>(y),
                   *oy = my.ptr<float>(y), *sx = slope_x.ptr<float>(y), *sy = slope_y.ptr<float>(y);
       float* dp = d.ptr<float>(y);

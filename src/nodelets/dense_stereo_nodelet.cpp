@@ -20,6 +20,7 @@
  * that frame with a throttled error naming the problem; the nodelet keeps running. The matcher's warnings
  * (no texture, little overlap) are throttled warnings.
  */
+#include <cv_bridge/cv_bridge.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/sync_policies/exact_time.h>
@@ -27,11 +28,12 @@
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/image_encodings.h>
 
 #include <memory>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "conversions.h"
+#include "skin3d/ros/conversions.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/stereo/dense_stereo.h"

@@ -18,10 +18,12 @@
  * throttled error naming the problem; the nodelet keeps running. Hopeless data (no healthy skin, too few
  * points) is not an error: the report says why in `warnings` (also a throttled warning).
  */
+#include <cv_bridge/cv_bridge.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/image_encodings.h>
 #include <skin3d/IndurationReport.h>
 #include <skin3d/SaveResults.h>
 
@@ -32,7 +34,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "conversions.h"
+#include "skin3d/ros/conversions.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/induration/induration.h"
 #include "skin3d/induration/induration_config.h"

@@ -15,6 +15,7 @@
  * Bad input (empty/black/textureless images, sizes, encodings, no features, no matches) drops the frame
  * with a throttled warning; the nodelet keeps running.
  */
+#include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
@@ -22,12 +23,13 @@
 #include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
 #include <skin3d/StereoMatchArray.h>
 
 #include <memory>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "conversions.h"
+#include "skin3d/ros/conversions.h"
 #include "skin3d/stereo/features.h"
 
 namespace skin3d {

@@ -30,7 +30,7 @@
 #include <memory>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "conversions.h"
+#include "skin3d/ros/conversions.h"
 #include "skin3d/stereo/stereo_landmarks.h"
 
 namespace skin3d {

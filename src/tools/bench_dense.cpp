@@ -44,7 +44,7 @@
 #include <vector>
 
 #include "skin3d/ros/bag_topics.h"
-#include "conversions.h"  // src/nodelets: CameraInfo message -> core struct
+#include "skin3d/ros/conversions.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/dense_stereo.h"

@@ -29,7 +29,7 @@
 #include <sstream>
 #include <string>
 
-#include "conversions.h"  // src/nodelets
+#include "skin3d/ros/conversions.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"

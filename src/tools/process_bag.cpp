@@ -47,10 +47,10 @@
 #include <sstream>
 #include <string>
 
-#include "conversions.h"  // src/nodelets
+#include "skin3d/ros/conversions.h"
 #include "process_bag_induration.h"
 #include "skin3d/ros/bag_topics.h"
-#include "run_info.h"
+#include "skin3d/common/run_info.h"
 #include "stereo_pairs.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/sphere_fit.h"
@@ -176,7 +176,7 @@ int run(const Args& a) {
   // frames to expect, for the progress line: landmark messages, or else left images
   int expected = static_cast<int>(use_images ? topics.count("stereo/left/image_raw") : topics.count("stereo/landmarks"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
-  tools::Progress progress(expected, a.quiet);
+  common::Progress progress(expected, a.quiet);
   const auto t_start = std::chrono::steady_clock::now();
   double frame_seconds = 0.0;
 
@@ -264,7 +264,7 @@ int run(const Args& a) {
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);
-  tools::writeParameters(a.out + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml", a.command_line,
+  common::writeParameters(a.out + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml", a.command_line,
                          slam::slamOptionKeys(), [&](const std::string& k) { return slam::getSlamOption(opt, k); });
   if (!a.quiet) std::cout << text << std::flush;
   return 0;

@@ -7,7 +7,7 @@
  * in m and left_rect.png), and prints a per-plaque table in mm.
  */
 #include "process_bag_induration.h"
-#include "run_info.h"
+#include "skin3d/common/run_info.h"
 
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -21,7 +21,7 @@
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 
-#include "conversions.h"  // src/nodelets
+#include "skin3d/ros/conversions.h"
 #include "skin3d/induration/induration.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/induration/induration_io.h"
@@ -131,7 +131,7 @@ int runInduration(const IndurationRun& a) {
 
   // ---- results (also when only some frames worked)
   const std::string yaml = a.out + "/induration.yaml";
-  writeParameters(a.out + "/parameters.yaml", "induration, keys of config/induration.yaml", a.command_line,
+  common::writeParameters(a.out + "/parameters.yaml", "induration, keys of config/induration.yaml", a.command_line,
                   induration::pipelineOptionKeys(),
                   [&](const std::string& k) { return induration::getPipelineOption(opt, k); });
   induration::writeInduration(yaml, records, opt.induration, "stereo_left_optical_frame", a.bag);

@@ -12,7 +12,7 @@
 #include <memory>
 #include <string>
 
-#include "conversions.h"  // src/nodelets
+#include "skin3d/ros/conversions.h"
 #include "skin3d/stereo/rectification.h"
 
 namespace skin3d {

@@ -22,7 +22,7 @@
 #include <limits>
 #include <mutex>
 
-#include "conversions.h"
+#include "skin3d/ros/conversions.h"
 #include "skin3d/sim/globe.h"
 
 using namespace skin3d;

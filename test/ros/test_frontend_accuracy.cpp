@@ -23,7 +23,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "bag_reading.h"
-#include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
+#include "skin3d/ros/conversions.h"
 #include "skin3d/stereo/features.h"
 #include "skin3d/stereo/rectification.h"
 #include "skin3d/stereo/stereo_landmarks.h"

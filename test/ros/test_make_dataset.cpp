@@ -22,7 +22,7 @@
 #include <random>
 
 #include "bag_reading.h"
-#include "conversions.h"  // src/nodelets: CameraInfo message <-> core struct
+#include "skin3d/ros/conversions.h"
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/geometry/stereo_rig.h"
 

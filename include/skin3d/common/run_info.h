@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
  * @file run_info.h
- * @brief What process_bag's two modes (SLAM, induration) share about a run: progress on long runs and the
- * parameters.yaml of the results directory (the effective value of every parameter, and the command line,
+ * @brief What a run of skin3d shares (process_bag's two modes, the SLAM nodelet's results): progress on long
+ * runs and the parameters.yaml of the results directory (the effective value of every parameter, and the command line,
  * so that a run can be repeated and the report can show its parameters).
  */
 #pragma once
@@ -17,7 +17,7 @@
 #include <vector>
 
 namespace skin3d {
-namespace tools {
+namespace common {
 
 /**
  * @brief Progress of a long offline run on stderr: "k / N frames (p %), elapsed, remaining" at most every
@@ -91,5 +91,5 @@ void writeParameters(const std::string& path, const std::string& what, const std
   if (!f) throw std::runtime_error("error while writing '" + path + "'");
 }
 
-}  // namespace tools
+}  // namespace common
 }  // namespace skin3d

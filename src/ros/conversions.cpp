@@ -1,40 +1,20 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// ROS <-> core conversions and input checks shared by the skin3d nodelets (ROS side only).
-#pragma once
+// skin3d_ros: ROS message <-> core struct conversions (see include/skin3d/ros/conversions.h).
+#include "skin3d/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
-#include <geometry_msgs/Pose.h>
-#include <ros/node_handle.h>
-#include <sensor_msgs/CameraInfo.h>
-#include <sensor_msgs/Image.h>
-#include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
-#include <skin3d/IndurationReport.h>
-#include <skin3d/Landmark.h>
-#include <skin3d/LandmarkArray.h>
-#include <xmlrpcpp/XmlRpcValue.h>
 
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <sstream>
-#include <string>
-#include <vector>
-
-#include "skin3d/geometry/camera.h"
-#include "skin3d/induration/induration.h"
-#include "skin3d/induration/induration_config.h"
-#include "skin3d/slam/slam_system.h"
-#include "skin3d/stereo/dense_stereo.h"
 
 namespace skin3d {
 namespace ros_conv {
 
-/** @brief A position and a rotation as a geometry_msgs/Pose. */
-inline geometry_msgs::Pose toPoseMsg(const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
+geometry_msgs::Pose toPoseMsg(const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
   geometry_msgs::Pose m;
   m.position.x = p.x();
   m.position.y = p.y();
@@ -46,7 +26,7 @@ inline geometry_msgs::Pose toPoseMsg(const Eigen::Vector3d& p, const Eigen::Quat
   return m;
 }
 
-inline geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
+geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   geometry::CameraInfo c;
   c.width = static_cast<int>(m.width);
   c.height = static_cast<int>(m.height);
@@ -58,8 +38,7 @@ inline geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   return c;
 }
 
-/** @brief The SLAM's measurements of one LandmarkArray (no checks: the SLAM drops bad ones and counts them). */
-inline std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a) {
+std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a) {
   std::vector<slam::Measurement> out;
   out.reserve(a.landmarks.size());
   for (const auto& l : a.landmarks) {
@@ -73,10 +52,9 @@ inline std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a) {
   return out;
 }
 
-/** @brief One landmark message: position (m), row-major 3x3 covariance (m^2), descriptor, strength, pixels. */
-inline skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eigen::Matrix3d& covariance,
-                                      const std::vector<float>& descriptor, float strength,
-                                      const Eigen::Vector2d& uv_left, const Eigen::Vector2d& uv_right) {
+skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eigen::Matrix3d& covariance,
+                               const std::vector<float>& descriptor, float strength,
+                               const Eigen::Vector2d& uv_left, const Eigen::Vector2d& uv_right) {
   skin3d::Landmark m;
   m.position.x = position.x();
   m.position.y = position.y();
@@ -91,8 +69,7 @@ inline skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eig
   return m;
 }
 
-/** @brief Empty when the camera_info is usable for rectification, else what is wrong with it. */
-inline std::string checkCameraInfo(const sensor_msgs::CameraInfo& m, const std::string& topic) {
+std::string checkCameraInfo(const sensor_msgs::CameraInfo& m, const std::string& topic) {
   if (m.K[0] == 0.0) return topic + ": uncalibrated camera_info (K[0] = 0)";
   if (m.P[0] == 0.0) return topic + ": camera_info has no projection matrix (P[0] = 0)";
   if (m.width == 0 || m.height == 0) return topic + ": camera_info has no image size";
@@ -101,8 +78,7 @@ inline std::string checkCameraInfo(const sensor_msgs::CameraInfo& m, const std::
   return "";
 }
 
-/** @brief Empty when the image can be used, else what is wrong with it (names the topic). */
-inline std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, const std::string& topic) {
+std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, const std::string& topic) {
   namespace enc = sensor_msgs::image_encodings;
   if (img.width == 0 || img.height == 0 || img.data.empty()) return topic + ": empty image";
   if (img.encoding != enc::MONO8 && img.encoding != enc::BGR8 && img.encoding != enc::RGB8 &&
@@ -118,8 +94,7 @@ inline std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::
   return "";
 }
 
-/** @brief 8-bit grayscale view of a checked image (throws cv_bridge::Exception on conversion failure). */
-inline cv::Mat toMono8(const sensor_msgs::Image& img) {
+cv::Mat toMono8(const sensor_msgs::Image& img) {
   namespace enc = sensor_msgs::image_encodings;
   if (img.encoding == enc::MONO16) {
     cv::Mat m16 = cv_bridge::toCvCopy(img, enc::MONO16)->image, m8;
@@ -129,11 +104,7 @@ inline cv::Mat toMono8(const sensor_msgs::Image& img) {
   return cv_bridge::toCvCopy(img, enc::MONO8)->image;
 }
 
-// ------------------------------------------------------------------ dense stereo and induration
-
-/** @brief A ROS parameter as the text the core's option tables parse (numbers in full precision, booleans
- *  true/false, lists space-separated); false for maps and other types. */
-inline bool xmlRpcToText(XmlRpc::XmlRpcValue& v, std::string* text) {
+bool xmlRpcToText(XmlRpc::XmlRpcValue& v, std::string* text) {
   std::ostringstream out;
   out.precision(17);
   switch (v.getType()) {
@@ -154,13 +125,26 @@ inline bool xmlRpcToText(XmlRpc::XmlRpcValue& v, std::string* text) {
   return true;
 }
 
-/**
- * @brief The dense stereo / induration options (induration/induration_config.h) from private parameters:
- * first the YAML file named by ~config (if set), then every key of pipelineOptionKeys() that is set as a
- * parameter, then validation. Problems go to `errors` (one line each, naming the key); a bad key keeps the
- * value it had, options that do not validate are reset to the defaults (the last error says so).
- */
-inline induration::PipelineOptions loadPipelineOptions(const ros::NodeHandle& pnh, std::vector<std::string>* errors) {
+void loadOptionParams(const ros::NodeHandle& pnh, const std::vector<std::string>& keys,
+                      const std::function<void(const std::string&, const std::string&)>& set,
+                      const std::function<std::string(const std::string&)>& get, std::vector<std::string>* errors) {
+  for (const std::string& key : keys) {
+    XmlRpc::XmlRpcValue v;
+    if (!pnh.getParam(key, v)) continue;
+    std::string text;
+    if (!xmlRpcToText(v, &text)) {
+      errors->push_back("parameter ~" + key + " must be a value or a list of values; keeping " + get(key));
+      continue;
+    }
+    try {
+      set(key, text);
+    } catch (const std::exception& e) {
+      errors->push_back(std::string(e.what()) + "; keeping " + get(key));
+    }
+  }
+}
+
+induration::PipelineOptions loadPipelineOptions(const ros::NodeHandle& pnh, std::vector<std::string>* errors) {
   induration::PipelineOptions opt;
   std::string config;
   if (pnh.getParam("config", config) && !config.empty()) {
@@ -170,21 +154,10 @@ inline induration::PipelineOptions loadPipelineOptions(const ros::NodeHandle& pn
       errors->push_back(std::string("~config: ") + e.what());
     }
   }
-  for (const std::string& key : induration::pipelineOptionKeys()) {
-    XmlRpc::XmlRpcValue v;
-    if (!pnh.getParam(key, v)) continue;
-    std::string text;
-    if (!xmlRpcToText(v, &text)) {
-      errors->push_back("parameter ~" + key + " must be a value or a list of values; keeping " +
-                        induration::getPipelineOption(opt, key));
-      continue;
-    }
-    try {
-      induration::setPipelineOption(&opt, key, text);
-    } catch (const std::exception& e) {
-      errors->push_back(std::string(e.what()) + "; keeping " + induration::getPipelineOption(opt, key));
-    }
-  }
+  loadOptionParams(
+      pnh, induration::pipelineOptionKeys(),
+      [&](const std::string& k, const std::string& v) { induration::setPipelineOption(&opt, k, v); },
+      [&](const std::string& k) { return induration::getPipelineOption(opt, k); }, errors);
   try {
     opt.validate();
   } catch (const std::exception& e) {
@@ -194,17 +167,8 @@ inline induration::PipelineOptions loadPipelineOptions(const ros::NodeHandle& pn
   return opt;
 }
 
-/** @brief Byte layout of the clouds that toCloudMsg writes (all float32). */
-enum DenseCloudField { kX = 0, kY, kZ, kRgb, kSigma, kRayX, kRayY, kRayZ, kDenseCloudFields };
-
-/**
- * @brief An organised PointCloud2 of a dense cloud (size of the image): fields x y z (m; NaN unknown,
- * is_dense false), rgb (packed float, from `colour`: grey or BGR 8-bit of the same size, white when empty),
- * sigma (m, 1 sigma along the ray; NaN unknown) and ray_x ray_y ray_z (unit viewing ray of every pixel, known
- * or not: what the induration needs to measure areas over holes).
- */
-inline sensor_msgs::PointCloud2Ptr toCloudMsg(const stereo::DenseCloud& cloud, const cv::Mat& colour,
-                                              const std_msgs::Header& header) {
+sensor_msgs::PointCloud2Ptr toCloudMsg(const stereo::DenseCloud& cloud, const cv::Mat& colour,
+                                       const std_msgs::Header& header) {
   const sensor_msgs::PointCloud2Ptr pc(new sensor_msgs::PointCloud2);
   pc->header = header;
   sensor_msgs::PointCloud2Modifier mod(*pc);
@@ -244,15 +208,8 @@ inline sensor_msgs::PointCloud2Ptr toCloudMsg(const stereo::DenseCloud& cloud, c
   return pc;
 }
 
-/**
- * @brief The dense cloud of an organised PointCloud2 (fields x y z float32 required; sigma, ray_x/y/z and rgb
- * used when present). Without `sigma`, sigma is 0 (unknown) at every known point; without rays, the ray of
- * a known point is its unit direction from the origin (the left camera centre), NaN elsewhere. `colour`
- * (optional) gets the rgb field as 8-bit BGR (empty without one).
- * @return empty on success, else what is wrong with the message (names the topic).
- */
-inline std::string fromCloudMsg(const sensor_msgs::PointCloud2& pc, const std::string& topic,
-                                stereo::DenseCloud* cloud, cv::Mat* colour) {
+std::string fromCloudMsg(const sensor_msgs::PointCloud2& pc, const std::string& topic,
+                         stereo::DenseCloud* cloud, cv::Mat* colour) {
   auto field = [&pc](const std::string& name) -> const sensor_msgs::PointField* {
     for (const auto& f : pc.fields)
       if (f.name == name) return &f;
@@ -325,8 +282,7 @@ inline std::string fromCloudMsg(const sensor_msgs::PointCloud2& pc, const std::s
   return "";
 }
 
-/** @brief The report message of one measurement (SI units, frame of `header`). */
-inline skin3d::IndurationReport toReportMsg(const induration::IndurationResult& r, const std_msgs::Header& header) {
+skin3d::IndurationReport toReportMsg(const induration::IndurationResult& r, const std_msgs::Header& header) {
   skin3d::IndurationReport m;
   m.header = header;
   const Eigen::Vector4d plane = r.reference.plane();

@@ -477,12 +477,22 @@ Refined refineLevel(const cv::Mat& L, const cv::Mat& R, int x_offset, cv::Mat d,
   return out;
 }
 
-}  // namespace
+/** The matcher's working frame: the crops around the roi and their pyramids (coarse level last). */
+struct Crops {
+  cv::Rect roi;          // in the image
+  int d_min = 0;         // the right crop is shifted by d_min: crop disparity d_c = d - d_min in [0, range]
+  int range = 0;
+  int levels = 0;        // pyramid levels below full resolution; s = 2^levels
+  int s = 1;
+  int num_disp = 0;      // SGBM's search at the coarse level
+  int pad = 0;           // the left crop starts pad columns before the roi (SGBM leaves them unknown)
+  int margin_y = 8;
+  std::vector<cv::Mat> pl, pr;  // grey float pyramids of the left and right crops
+};
 
-DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& o) {
-  const auto t0 = Clock::now();
-  validate(left, right, o);
-  DisparityMap out;
+/** The roi checked (clipped to the image with a warning), the crops and their pyramids, a saturation warning. */
+Crops prepareCrops(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& o, DisparityMap& out) {
+  Crops c;
   const cv::Rect image(0, 0, left.cols, left.rows);
   cv::Rect roi = o.roi.area() > 0 ? o.roi : image;
   if (o.roi.width < 0 || o.roi.height < 0) throw DenseStereoError("roi has a negative size");
@@ -495,29 +505,23 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     roi &= image;
   }
   if (roi.width < 16 || roi.height < 16) throw DenseStereoError("roi is smaller than 16 x 16 px");
-  out.roi = roi;
-  out.disparity = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
-  out.sigma = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
-  out.vertical = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
-
-  // ---- prepare: grey float crops; the right crop is shifted by the minimum disparity so that the
-  // crop disparity d_c = d - d_min lies in [0, range]; the left crop is extended leftwards by the range.
-  const int d_min = static_cast<int>(std::floor(o.min_disparity));
-  const int range = static_cast<int>(std::ceil(o.max_disparity)) - d_min;
-  const int margin_y = 8;
-  int levels = 0;
+  c.roi = roi;
+  // the right crop is shifted by the minimum disparity so that the crop disparity d_c = d - d_min lies in
+  // [0, range]; the left crop is extended leftwards by the range.
+  c.d_min = static_cast<int>(std::floor(o.min_disparity));
+  c.range = static_cast<int>(std::ceil(o.max_disparity)) - c.d_min;
   // halve until the roi is at most coarse_max_width wide and the search at most kMaxCoarseDisparities deep
-  while (((roi.width >> levels) > o.coarse_max_width || (range >> levels) > kMaxCoarseDisparities) && levels < 6) ++levels;
-  out.coarse_scale = 1 << levels;
-  const int s = out.coarse_scale;
+  while (((roi.width >> c.levels) > o.coarse_max_width || (c.range >> c.levels) > kMaxCoarseDisparities) && c.levels < 6)
+    ++c.levels;
+  c.s = 1 << c.levels;
   // SGBM searches [0, num_disp) at the coarse level and leaves the first num_disp columns unknown: the left
   // crop starts num_disp * s columns before the roi.
-  const int num_disp = ((static_cast<int>(std::ceil(static_cast<double>(range) / s)) + 1 + 15) / 16) * 16;
-  const int pad = num_disp * s;
-  const cv::Rect lcrop(roi.x - pad, roi.y - margin_y, roi.width + pad, roi.height + 2 * margin_y);
-  const cv::Rect rcrop = lcrop - cv::Point(d_min, 0);
-  const cv::Mat lf = paddedCrop(toGreyFloat(left(image)), lcrop);
-  const cv::Mat rf = paddedCrop(toGreyFloat(right(image)), rcrop);
+  c.num_disp = ((static_cast<int>(std::ceil(static_cast<double>(c.range) / c.s)) + 1 + 15) / 16) * 16;
+  c.pad = c.num_disp * c.s;
+  const cv::Rect lcrop(roi.x - c.pad, roi.y - c.margin_y, roi.width + c.pad, roi.height + 2 * c.margin_y);
+  const cv::Rect rcrop = lcrop - cv::Point(c.d_min, 0);
+  c.pl = {paddedCrop(toGreyFloat(left(image)), lcrop)};
+  c.pr = {paddedCrop(toGreyFloat(right(image)), rcrop)};
   {
     // Saturation: clipped pixels carry no texture.
     const cv::Mat lr = toGreyFloat(left(roi)), rr = toGreyFloat(right(roi));
@@ -527,19 +531,21 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
       out.warnings.push_back("saturated images: " + num(std::round(100 * sl)) + " % (left) and " +
                              num(std::round(100 * sr)) + " % (right) of the roi at full scale");
   }
-  std::vector<cv::Mat> pl{lf}, pr{rf};
-  for (int l = 1; l <= levels; ++l) {
+  for (int l = 1; l <= c.levels; ++l) {
     cv::Mat a, b;
-    cv::pyrDown(pl.back(), a);
-    cv::pyrDown(pr.back(), b);
-    pl.push_back(a);
-    pr.push_back(b);
+    cv::pyrDown(c.pl.back(), a);
+    cv::pyrDown(c.pr.back(), b);
+    c.pl.push_back(a);
+    c.pr.push_back(b);
   }
-  const auto t1 = Clock::now();
+  return c;
+}
 
-  // ---- semi-global matching at the coarse level
+/** Semi-global matching at the coarse level (then the slant passes): crop disparities, NaN where unknown.
+ *  l8, r8: the 8-bit images SGBM saw (the slant passes need them). */
+cv::Mat coarseSemiGlobal(const Crops& c, const DenseStereoOptions& o) {
   const int bs = o.block_size;
-  auto sgbm = cv::StereoSGBM::create(0, num_disp, bs, o.p1 > 0 ? o.p1 : 8 * bs * bs, o.p2 > 0 ? o.p2 : 32 * bs * bs,
+  auto sgbm = cv::StereoSGBM::create(0, c.num_disp, bs, o.p1 > 0 ? o.p1 : 8 * bs * bs, o.p2 > 0 ? o.p2 : 32 * bs * bs,
                                      static_cast<int>(std::lround(o.lr_max_diff)), 0, o.uniqueness_ratio,
                                      o.speckle_window, static_cast<int>(std::lround(o.speckle_range)), sgbmMode(o.sgbm_mode));
   if (o.lr_max_diff <= 0) sgbm->setDisp12MaxDiff(-1);
@@ -548,161 +554,145 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   // cameras' gain, offset, gamma and vignetting differences drop out, and skin's few grey levels of texture
   // fill the 8-bit range instead of being quantised away
   if (!o.weak_texture) {
-    pl[levels].convertTo(l8, CV_8U, 255.0);
-    pr[levels].convertTo(r8, CV_8U, 255.0);
+    c.pl[c.levels].convertTo(l8, CV_8U, 255.0);
+    c.pr[c.levels].convertTo(r8, CV_8U, 255.0);
   } else {
     const double ns = 1.5 * bs;
-    normaliseLocal(pl[levels], ns).convertTo(l8, CV_8U, 40.0, 128.0);
-    normaliseLocal(pr[levels], ns).convertTo(r8, CV_8U, 40.0, 128.0);
+    normaliseLocal(c.pl[c.levels], ns).convertTo(l8, CV_8U, 40.0, 128.0);
+    normaliseLocal(c.pr[c.levels], ns).convertTo(r8, CV_8U, 40.0, 128.0);
   }
   sgbm->compute(l8, r8, d16);
   d16.convertTo(dc, CV_32F, 1.0 / 16.0);
   dc.setTo(kNaN, d16 < 0);  // invalid: OpenCV marks (min_disparity - 1) * 16
   for (int pass = 0; pass < o.slant_passes; ++pass) dc = followSlant(l8, r8, dc, sgbm, o);
-  const auto t2 = Clock::now();
-  const cv::Rect coarse_roi(pad / s, margin_y / s, std::max(1, roi.width / s), std::max(1, roi.height / s));
-  const cv::Rect coarse_roi_c = coarse_roi & cv::Rect(0, 0, dc.cols, dc.rows);
-  const double coarse_valid =
-      coarse_roi_c.area() > 0 ? cv::countNonZero(dc(coarse_roi_c) == dc(coarse_roi_c)) / static_cast<double>(coarse_roi_c.area())
-                              : 0.0;
+  return dc;
+}
 
-  cv::Mat d_full, v_full, sigma_full, valid_full, reason_full;  // reason_full: UnknownReason per crop pixel
-  // texture of the left roi at the coarse level (normalised gradient energy; a uniform image has ~0)
-  double texture = 0;
-  {
-    cv::Mat gx, gy;
-    const cv::Mat a = pl[levels](coarse_roi_c);
-    cv::Sobel(a, gx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
-    cv::Sobel(a, gy, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
-    texture = cv::mean(gx.mul(gx) + gy.mul(gy))[0];
-  }
-  const bool no_texture = texture < 1e-6;
-  const std::string no_texture_msg = "no texture: the left image is uniform in the roi (nothing to match)";
-  if (coarse_valid < 0.02 || no_texture) {
-    // Nothing matched: say why.
-    if (no_texture)
-      out.warnings.push_back(no_texture_msg);
-    else
-      out.warnings.push_back("no overlap: under 2 % of the roi matched within the disparity range [" + num(o.min_disparity) +
-                             ", " + num(o.max_disparity) + "] px (do the images overlap? is the working depth range right?)");
-    out.timing.prepare = seconds(t0, t1);
-    out.timing.sgbm = seconds(t1, t2);
-    out.timing.total = seconds(t0, Clock::now());
-    return out;
-  }
-  cv::Mat coarse_known = (dc == dc);
-  int c0 = 0;  // first crop column of the fine-level maps below
-  if (o.subpixel == "sgbm") {
-    cv::resize(dc, d_full, lf.size(), 0, 0, cv::INTER_NEAREST);
-    d_full *= s;
-    cv::Mat known;
-    cv::resize(coarse_known, known, lf.size(), 0, 0, cv::INTER_NEAREST);
-    valid_full = known;
-    reason_full = cv::Mat(known.size(), CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
-    reason_full.setTo(0, known);
-    // SGBM's parabola: typically 0.1-0.3 px at its level (pixel locking); a nominal 0.25 px, scaled
-    sigma_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0.25 * s));
-    v_full = cv::Mat(lf.size(), CV_32F, cv::Scalar(0));
-  } else {
-    // ---- coarse-to-fine local fit on normalised images, over the roi plus a margin only (the columns
-    // before it were needed by the semi-global search, not here)
-    const double norm_sigma = 0.75 * o.refine_window;
-    const int margin_x = s * (2 * o.refine_window + 4);
-    c0 = std::max(0, (pad - margin_x) / s * s);
-    cv::Mat d = fillHoles(dc)(cv::Rect(c0 / s, 0, dc.cols - c0 / s, dc.rows)).clone();
-    cv::Mat v = cv::Mat::zeros(d.size(), CV_32F);
-    Refined r;
-    for (int l = levels; l >= 0; --l) {
-      const int cl = c0 >> l;
-      const cv::Rect crop(cl, 0, pl[l].cols - cl, pl[l].rows);
-      if (l < levels) {
-        cv::Mat du, vu;
-        cv::resize(d, du, crop.size(), 0, 0, cv::INTER_LINEAR);
-        cv::resize(v, vu, crop.size(), 0, 0, cv::INTER_LINEAR);
-        d = du * 2.0;
-        v = vu * 2.0;
-      }
-      // the two views normalised side by side (two tasks: each filter runs on one core)
-      cv::Mat Ln, Rn;
-      runTasks({[&] { Ln = normaliseLocal(pl[l], norm_sigma)(crop); }, [&] { Rn = normaliseLocal(pr[l], norm_sigma); }});
-      r = refineLevel(Ln, Rn, cl, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
-      d = r.d;
-      v = r.v;
+/** The fine-level answer over the crop from column c0 on: disparity, vertical shift, sigma, validity and why not. */
+struct FineMaps {
+  cv::Mat d, v, sigma, valid, reason;
+  int c0 = 0;
+};
+
+/** subpixel = "sgbm": the coarse answer, upsampled (nearest), with a nominal sigma. */
+FineMaps fromSemiGlobal(const Crops& c, const cv::Mat& dc) {
+  FineMaps f;
+  const cv::Size size = c.pl[0].size();
+  cv::resize(dc, f.d, size, 0, 0, cv::INTER_NEAREST);
+  f.d *= c.s;
+  cv::resize(cv::Mat(dc == dc), f.valid, size, 0, 0, cv::INTER_NEAREST);
+  f.reason = cv::Mat(size, CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
+  f.reason.setTo(0, f.valid);
+  // SGBM's parabola: typically 0.1-0.3 px at its level (pixel locking); a nominal 0.25 px, scaled
+  f.sigma = cv::Mat(size, CV_32F, cv::Scalar(0.25 * c.s));
+  f.v = cv::Mat(size, CV_32F, cv::Scalar(0));
+  return f;
+}
+
+/** Why the fit at one pixel is not kept (kKnown: kept). hole: the semi-global matcher had no answer there. */
+UnknownReason judgeFit(const DenseStereoOptions& o, bool hole, float d, float sgm, float sigma, float corr,
+                       float corr_smooth, float texture, float max_shift) {
+  // where the semi-global matcher had no answer, the fit alone must show that the views look alike, at full
+  // resolution too
+  const bool alike = hole ? corr_smooth >= kHoleCorrelationSmooth && corr >= kHoleCorrelation
+                          : corr_smooth >= static_cast<float>(o.min_correlation);
+  if (texture < o.min_texture) return UnknownReason::kTexture;  // nothing to fit
+  if (!alike) return UnknownReason::kCorrelation;                // the images do not look alike here
+  if (!(sigma <= o.max_sigma)) return UnknownReason::kSigma;
+  if ((!o.weak_texture || !hole) && !(std::fabs(d - sgm) <= max_shift))
+    return UnknownReason::kDisagreement;  // the fit and the semi-global matcher disagree: one of them is wrong
+  return UnknownReason::kKnown;
+}
+
+/** subpixel = "lk": the coarse-to-fine local fit from the coarse answer, then each pixel judged (judgeFit). */
+FineMaps fitCoarseToFine(const Crops& c, const cv::Mat& dc, const DenseStereoOptions& o) {
+  const int s = c.s;
+  const cv::Size full = c.pl[0].size();
+  FineMaps f;
+  // the fit covers the roi plus a margin only (the columns before it were needed by the semi-global search)
+  const double norm_sigma = 0.75 * o.refine_window;
+  const int margin_x = s * (2 * o.refine_window + 4);
+  f.c0 = std::max(0, (c.pad - margin_x) / s * s);
+  cv::Mat d = fillHoles(dc)(cv::Rect(f.c0 / s, 0, dc.cols - f.c0 / s, dc.rows)).clone();
+  cv::Mat v = cv::Mat::zeros(d.size(), CV_32F);
+  Refined r;
+  for (int l = c.levels; l >= 0; --l) {
+    const int cl = f.c0 >> l;
+    const cv::Rect crop(cl, 0, c.pl[l].cols - cl, c.pl[l].rows);
+    if (l < c.levels) {
+      cv::Mat du, vu;
+      cv::resize(d, du, crop.size(), 0, 0, cv::INTER_LINEAR);
+      cv::resize(v, vu, crop.size(), 0, 0, cv::INTER_LINEAR);
+      d = du * 2.0;
+      v = vu * 2.0;
     }
-    d_full = d;
-    v_full = v;
-    sigma_full = r.sigma;
-    // validity: the semi-global value known (nearest), the fit close to it, enough texture, correlation, sigma
-    // Holes of the semi-global map were filled from their surroundings for the start; the fit decides there
-    // (weak texture is aggregated by the fit's window instead of dropped), held to the filled field.
-    // (The fit is held to the semi-global value where there is one; in its holes the filled start may be off
-    // by more than that, and the fit's own statistics decide.)
-    cv::Mat sgm_up;
-    cv::resize(dc, sgm_up, lf.size(), 0, 0, cv::INTER_LINEAR);
-    const cv::Rect fine(c0, 0, lf.cols - c0, lf.rows);
-    sgm_up = sgm_up(fine) * s;
-    if (o.weak_texture) {
-      valid_full = cv::Mat(sgm_up.size(), CV_8U, cv::Scalar(255));
-    } else {  // only where the semi-global matcher answered
-      cv::resize(coarse_known, valid_full, lf.size(), 0, 0, cv::INTER_NEAREST);
-      valid_full = valid_full(fine).clone();
-    }
-    reason_full = cv::Mat(valid_full.size(), CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
-    reason_full.setTo(0, valid_full);
-    const float max_shift = static_cast<float>(o.refine_max_shift * s);
-    for (int y = 0; y < valid_full.rows; ++y) {
-      uchar* vp = valid_full.ptr<uchar>(y);
-      uchar* rp = reason_full.ptr<uchar>(y);
-      const float* dp = d_full.ptr<float>(y);
-      const float* gp = sgm_up.ptr<float>(y);
-      const float* sg = r.sigma.ptr<float>(y);
-      const float* cr = r.corr.ptr<float>(y);
-      const float* cs = r.corr_smooth.ptr<float>(y);
-      const float* tx = r.texture.ptr<float>(y);
-      for (int x = 0; x < valid_full.cols; ++x) {
-        if (!vp[x]) continue;
-        // where the semi-global matcher had no answer, the fit alone must show that the views look alike, at
-        // full resolution too
-        const bool hole = !std::isfinite(gp[x]);
-        const bool alike = hole ? cs[x] >= kHoleCorrelationSmooth && cr[x] >= kHoleCorrelation
-                                : cs[x] >= static_cast<float>(o.min_correlation);
-        UnknownReason why = UnknownReason::kKnown;
-        if (tx[x] < o.min_texture)
-          why = UnknownReason::kTexture;  // nothing to fit
-        else if (!alike)
-          why = UnknownReason::kCorrelation;  // the images do not look alike here
-        else if (!(sg[x] <= o.max_sigma))
-          why = UnknownReason::kSigma;
-        else if ((!o.weak_texture || std::isfinite(gp[x])) && !(std::fabs(dp[x] - gp[x]) <= max_shift))
-          why = UnknownReason::kDisagreement;  // the fit and the semi-global matcher disagree: one of them is wrong
-        if (why != UnknownReason::kKnown) {
-          vp[x] = 0;
-          rp[x] = static_cast<uchar>(why);
-        }
+    // the two views normalised side by side (two tasks: each filter runs on one core)
+    cv::Mat Ln, Rn;
+    runTasks({[&] { Ln = normaliseLocal(c.pl[l], norm_sigma)(crop); }, [&] { Rn = normaliseLocal(c.pr[l], norm_sigma); }});
+    r = refineLevel(Ln, Rn, cl, d, v, o.refine_window, o.refine_iterations + (l == 0 ? 1 : 0), o.vertical, l == 0);
+    d = r.d;
+    v = r.v;
+  }
+  f.d = d;
+  f.v = v;
+  f.sigma = r.sigma;
+  // validity: the semi-global value known (nearest), the fit close to it, enough texture, correlation, sigma
+  // Holes of the semi-global map were filled from their surroundings for the start; the fit decides there
+  // (weak texture is aggregated by the fit's window instead of dropped), held to the filled field.
+  // (The fit is held to the semi-global value where there is one; in its holes the filled start may be off
+  // by more than that, and the fit's own statistics decide.)
+  cv::Mat sgm_up;
+  cv::resize(dc, sgm_up, full, 0, 0, cv::INTER_LINEAR);
+  const cv::Rect fine(f.c0, 0, full.width - f.c0, full.height);
+  sgm_up = sgm_up(fine) * s;
+  if (o.weak_texture) {
+    f.valid = cv::Mat(sgm_up.size(), CV_8U, cv::Scalar(255));
+  } else {  // only where the semi-global matcher answered
+    cv::resize(cv::Mat(dc == dc), f.valid, full, 0, 0, cv::INTER_NEAREST);
+    f.valid = f.valid(fine).clone();
+  }
+  f.reason = cv::Mat(f.valid.size(), CV_8U, cv::Scalar(static_cast<int>(UnknownReason::kNoSemiGlobal)));
+  f.reason.setTo(0, f.valid);
+  const float max_shift = static_cast<float>(o.refine_max_shift * s);
+  for (int y = 0; y < f.valid.rows; ++y) {
+    uchar* vp = f.valid.ptr<uchar>(y);
+    uchar* rp = f.reason.ptr<uchar>(y);
+    const float *dp = f.d.ptr<float>(y), *gp = sgm_up.ptr<float>(y), *sg = r.sigma.ptr<float>(y),
+                *cr = r.corr.ptr<float>(y), *cs = r.corr_smooth.ptr<float>(y), *tx = r.texture.ptr<float>(y);
+    for (int x = 0; x < f.valid.cols; ++x) {
+      if (!vp[x]) continue;
+      const UnknownReason why = judgeFit(o, !std::isfinite(gp[x]), dp[x], gp[x], sg[x], cr[x], cs[x], tx[x], max_shift);
+      if (why != UnknownReason::kKnown) {
+        vp[x] = 0;
+        rp[x] = static_cast<uchar>(why);
       }
     }
   }
-  // Small islands of valid pixels (a few window sizes) in a sea of unknown ones are chance fits on noise
-  // (a dark background, normalised, is all noise): removed as SGBM's speckle filter does at the coarse level.
-  if (o.weak_texture && o.speckle_window > 0 && o.subpixel == "lk") {
-    cv::Mat d16(d_full.size(), CV_16S);
-    for (int y = 0; y < d16.rows; ++y) {
-      const float* dp = d_full.ptr<float>(y);
-      const uchar* vp = valid_full.ptr<uchar>(y);
-      short* q = d16.ptr<short>(y);
-      for (int x = 0; x < d16.cols; ++x)
-        q[x] = vp[x] && std::isfinite(dp[x]) ? static_cast<short>(std::clamp(std::lround(dp[x] * 4.0f), -32000L, 32000L)) : -32768;
-    }
-    cv::filterSpeckles(d16, -32768, o.speckle_window * s * s, static_cast<double>(4 * s) * o.speckle_range);
-    const cv::Mat island = (d16 == -32768) & valid_full;
-    reason_full.setTo(static_cast<int>(UnknownReason::kIsland), island);
-    valid_full.setTo(0, island);
-  }
-  const auto t3 = Clock::now();
+  return f;
+}
 
-  // ---- back to image coordinates: d = d_c + d_min. A pixel whose matching window reaches beyond either
-  // image (the crops are zero-padded there) is unknown.
-  const cv::Rect in_crop(pad - c0, margin_y, roi.width, roi.height);
+/** Small islands of valid pixels (a few window sizes) in a sea of unknown ones are chance fits on noise (a dark
+ *  background, normalised, is all noise): removed as SGBM's speckle filter does at the coarse level. */
+void removeIslands(FineMaps& f, const DenseStereoOptions& o, int s) {
+  cv::Mat d16(f.d.size(), CV_16S);
+  for (int y = 0; y < d16.rows; ++y) {
+    const float* dp = f.d.ptr<float>(y);
+    const uchar* vp = f.valid.ptr<uchar>(y);
+    short* q = d16.ptr<short>(y);
+    for (int x = 0; x < d16.cols; ++x)
+      q[x] = vp[x] && std::isfinite(dp[x]) ? static_cast<short>(std::clamp(std::lround(dp[x] * 4.0f), -32000L, 32000L)) : -32768;
+  }
+  cv::filterSpeckles(d16, -32768, o.speckle_window * s * s, static_cast<double>(4 * s) * o.speckle_range);
+  const cv::Mat island = (d16 == -32768) & f.valid;
+  f.reason.setTo(static_cast<int>(UnknownReason::kIsland), island);
+  f.valid.setTo(0, island);
+}
+
+/** Back to image coordinates: d = d_c + d_min. A pixel whose matching window reaches beyond either image (the
+ *  crops are padded there) is unknown. Fills out's maps, valid_fraction and unknown_share. */
+void writeImageMaps(const Crops& c, const FineMaps& f, const DenseStereoOptions& o, const cv::Mat& left, DisparityMap& out) {
+  const cv::Rect& roi = c.roi;
+  const cv::Rect in_crop(c.pad - f.c0, c.margin_y, roi.width, roi.height);
   const int half = (o.subpixel == "lk" ? o.refine_window : o.block_size) / 2;
   int known = 0;
   out.unknown_reason = cv::Mat(left.size(), CV_8U, cv::Scalar(255));
@@ -710,12 +700,12 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
   for (int y = 0; y < roi.height; ++y) {
     const int yi = y + roi.y;
     if (yi < half || yi >= left.rows - half) continue;
-    const uchar* why = reason_full.ptr<uchar>(y + in_crop.y) + in_crop.x;
+    const uchar* why = f.reason.ptr<uchar>(y + in_crop.y) + in_crop.x;
     uchar* ow = out.unknown_reason.ptr<uchar>(yi) + roi.x;
-    const float* dp = d_full.ptr<float>(y + in_crop.y) + in_crop.x;
-    const float* vp = v_full.ptr<float>(y + in_crop.y) + in_crop.x;
-    const float* sp = sigma_full.ptr<float>(y + in_crop.y) + in_crop.x;
-    const uchar* ok = valid_full.ptr<uchar>(y + in_crop.y) + in_crop.x;
+    const float* dp = f.d.ptr<float>(y + in_crop.y) + in_crop.x;
+    const float* vp = f.v.ptr<float>(y + in_crop.y) + in_crop.x;
+    const float* sp = f.sigma.ptr<float>(y + in_crop.y) + in_crop.x;
+    const uchar* ok = f.valid.ptr<uchar>(y + in_crop.y) + in_crop.x;
     float* od = out.disparity.ptr<float>(yi) + roi.x;
     float* ov = out.vertical.ptr<float>(yi) + roi.x;
     float* os = out.sigma.ptr<float>(yi) + roi.x;
@@ -725,7 +715,7 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
         continue;
       }
       const int xi = x + roi.x;
-      const float d = dp[x] + static_cast<float>(d_min);
+      const float d = dp[x] + static_cast<float>(c.d_min);
       const float xr = static_cast<float>(xi) - d;
       if (xi < half || xi >= left.cols - half || !(xr >= half) || !(xr <= left.cols - 1 - half)) continue;
       od[x] = d;
@@ -736,19 +726,64 @@ DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const D
     }
   }
   out.valid_fraction = known / static_cast<double>(roi.area());
-  {
-    std::vector<int> counts(static_cast<size_t>(UnknownReason::kCount), 0);
-    for (int y = roi.y; y < roi.y + roi.height; ++y) {
-      const uchar* w = out.unknown_reason.ptr<uchar>(y);
-      for (int x = roi.x; x < roi.x + roi.width; ++x) ++counts[w[x] < counts.size() ? w[x] : 0];
-    }
-    for (int c : counts) out.unknown_share.push_back(c / static_cast<double>(roi.area()));
+  std::vector<int> counts(static_cast<size_t>(UnknownReason::kCount), 0);
+  for (int y = roi.y; y < roi.y + roi.height; ++y) {
+    const uchar* w = out.unknown_reason.ptr<uchar>(y);
+    for (int x = roi.x; x < roi.x + roi.width; ++x) ++counts[w[x] < counts.size() ? w[x] : 0];
   }
+  for (int n : counts) out.unknown_share.push_back(n / static_cast<double>(roi.area()));
+}
+
+/** Why nothing could be matched (empty: something can): no texture in the roi, or no overlap in the range. */
+std::string nothingToMatch(const Crops& c, const cv::Mat& dc, const DenseStereoOptions& o) {
+  const cv::Rect coarse_roi(c.pad / c.s, c.margin_y / c.s, std::max(1, c.roi.width / c.s), std::max(1, c.roi.height / c.s));
+  const cv::Rect coarse_roi_c = coarse_roi & cv::Rect(0, 0, dc.cols, dc.rows);
+  const double coarse_valid =
+      coarse_roi_c.area() > 0 ? cv::countNonZero(dc(coarse_roi_c) == dc(coarse_roi_c)) / static_cast<double>(coarse_roi_c.area())
+                              : 0.0;
+  // texture of the left roi at the coarse level (normalised gradient energy; a uniform image has ~0)
+  cv::Mat gx, gy;
+  const cv::Mat a = c.pl[c.levels](coarse_roi_c);
+  cv::Sobel(a, gx, CV_32F, 1, 0, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+  cv::Sobel(a, gy, CV_32F, 0, 1, 3, 1.0 / 8.0, 0, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
+  const double texture = cv::mean(gx.mul(gx) + gy.mul(gy))[0];
+  if (texture < 1e-6) return "no texture: the left image is uniform in the roi (nothing to match)";
+  if (coarse_valid < 0.02)
+    return "no overlap: under 2 % of the roi matched within the disparity range [" + num(o.min_disparity) + ", " +
+           num(o.max_disparity) + "] px (do the images overlap? is the working depth range right?)";
+  return "";
+}
+
+}  // namespace
+
+DisparityMap computeDisparity(const cv::Mat& left, const cv::Mat& right, const DenseStereoOptions& o) {
+  const auto t0 = Clock::now();
+  validate(left, right, o);
+  DisparityMap out;
+  out.disparity = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+  out.sigma = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+  out.vertical = cv::Mat(left.size(), CV_32F, cv::Scalar(kNaN));
+  const Crops c = prepareCrops(left, right, o, out);
+  out.roi = c.roi;
+  out.coarse_scale = c.s;
+  const auto t1 = Clock::now();
+  const cv::Mat dc = coarseSemiGlobal(c, o);
+  const auto t2 = Clock::now();
+  out.timing.prepare = seconds(t0, t1);
+  out.timing.sgbm = seconds(t1, t2);
+  const std::string nothing = nothingToMatch(c, dc, o);
+  if (!nothing.empty()) {
+    out.warnings.push_back(nothing);
+    out.timing.total = seconds(t0, Clock::now());
+    return out;
+  }
+  FineMaps f = o.subpixel == "sgbm" ? fromSemiGlobal(c, dc) : fitCoarseToFine(c, dc, o);
+  if (o.weak_texture && o.speckle_window > 0 && o.subpixel == "lk") removeIslands(f, o, c.s);
+  const auto t3 = Clock::now();
+  writeImageMaps(c, f, o, left, out);
   if (out.valid_fraction < 0.1)
     out.warnings.push_back("little matched: " + num(std::round(1000 * out.valid_fraction) / 10) +
                            " % of the roi has a disparity (texture, overlap, saturation or disparity range?)");
-  out.timing.prepare = seconds(t0, t1);
-  out.timing.sgbm = seconds(t1, t2);
   out.timing.refine = seconds(t2, t3);
   out.timing.total = seconds(t0, Clock::now());
   return out;

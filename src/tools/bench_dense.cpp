@@ -36,6 +36,7 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -157,6 +158,123 @@ void plainSgbm(const cv::Mat& left, const cv::Mat& right, const cv::Rect& roi, d
   row->valid.push_back(static_cast<double>(cv::countNonZero(d >= 0)) / d.total());
 }
 
+/** The first `frames_wanted` stereo pairs of the bag (matched by stamp, mono8) and the first camera_info of each
+ *  side. @return 0, or 1 with a message on stderr. */
+int readPairs(const std::string& bag_path, const std::string& bag_ns, long frames_wanted,
+              std::vector<std::pair<cv::Mat, cv::Mat>>* out, geometry::CameraInfo* li_out, geometry::CameraInfo* ri_out) {
+  std::vector<std::pair<cv::Mat, cv::Mat>>& frames = *out;
+  geometry::CameraInfo& li = *li_out;
+  geometry::CameraInfo& ri = *ri_out;
+  bool have_li = false, have_ri = false;
+  try {
+    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+    const ros_io::BagTopics topics(bag, bag_path,
+                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
+                                    "stereo/right/camera_info"},
+                                   bag_ns);
+    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
+    std::map<ros::Time, std::pair<cv::Mat, cv::Mat>> pending;
+    for (const rosbag::MessageInstance& m : view) {
+      if (static_cast<long>(frames.size()) >= frames_wanted && have_li && have_ri) break;
+      const std::string topic = topics.relative(m.getTopic());
+      if (topic == "stereo/left/camera_info" && !have_li) {
+        li = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
+        have_li = true;
+      } else if (topic == "stereo/right/camera_info" && !have_ri) {
+        ri = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
+        have_ri = true;
+      } else if ((topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") &&
+                 static_cast<long>(frames.size()) < frames_wanted) {
+        const auto img = m.instantiate<sensor_msgs::Image>();
+        auto& p = pending[img->header.stamp];
+        (topic == "stereo/left/image_raw" ? p.first : p.second) = ros_conv::toMono8(*img);
+        if (!p.first.empty() && !p.second.empty()) {
+          frames.push_back(p);
+          pending.erase(img->header.stamp);
+        }
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dense: cannot read " << bag_path << ": " << e.what() << "\n";
+    return 1;
+  }
+  if (frames.empty() || !have_li || !have_ri) {
+    std::cerr << "bench_dense: " << bag_path
+              << " has no stereo/{left,right}/image_raw pairs with equal stamps or no stereo/{left,right}/camera_info\n";
+    return 1;
+  }
+  const cv::Size size = frames[0].first.size();
+  if (li.width != size.width || li.height != size.height) {
+    std::cerr << "bench_dense: camera_info size " << li.width << "x" << li.height << " differs from the images' "
+              << size.width << "x" << size.height << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+/** A strongly converged rig rectified with flags 0 may put the working area far from the image centre: a region
+ *  of the roi's size centred on the textured part of the first left rectified image (none: no textured part).
+ *  Throws what the rectification throws. */
+std::optional<std::pair<std::string, cv::Rect>> texturedRegion(const geometry::CameraInfo& li, const cv::Mat& first_left,
+                                                               const cv::Rect& roi) {
+  const cv::Size size = first_left.size();
+  const cv::Mat left = stereo::Rectifier(li)(first_left);
+  cv::Mat small, f, mean, sq;
+  const double k = std::max(1.0, size.width / 512.0);
+  cv::resize(left, small, cv::Size(), 1.0 / k, 1.0 / k, cv::INTER_AREA);
+  small.convertTo(f, CV_32F);
+  cv::boxFilter(f, mean, CV_32F, cv::Size(7, 7));
+  cv::boxFilter(f.mul(f), sq, CV_32F, cv::Size(7, 7));
+  const cv::Mat stddev_sq = sq - mean.mul(mean);
+  const cv::Mat textured = stddev_sq > 8.0 * 8.0;  // grey levels
+  const cv::Moments mo = cv::moments(textured, true);
+  if (!(mo.m00 > 0)) return std::nullopt;
+  const cv::Point2d c(k * mo.m10 / mo.m00, k * mo.m01 / mo.m00);
+  cv::Rect t(static_cast<int>(std::lround(c.x - roi.width / 2.0)), static_cast<int>(std::lround(c.y - roi.height / 2.0)),
+             roi.width, roi.height);
+  t.x = std::clamp(t.x, 0, size.width - t.width);
+  t.y = std::clamp(t.y, 0, size.height - t.height);
+  return std::make_pair("textured area " + std::to_string(t.width) + "x" + std::to_string(t.height) + " at (" +
+                            std::to_string(t.x) + ", " + std::to_string(t.y) + ")",
+                        t);
+}
+
+/** The benchmark's Markdown report on stdout: machine, date, command, inputs, then one row per input and method. */
+void printReport(int argc, char** argv, const std::string& bag_path, std::size_t pairs, const cv::Size& size,
+                 double z_min, double z_max, const std::pair<double, double>& range, int num,
+                 const std::vector<double>& rectify_ms, const std::vector<Row>& rows, const std::vector<std::string>& warnings) {
+  const long nproc = sysconf(_SC_NPROCESSORS_ONLN);
+  std::string cmd;
+  for (int i = 0; i < argc; ++i) cmd += (i ? " " : "") + std::string(i ? argv[i] : "bench_dense");
+  auto cell = [](const std::vector<double>& v, int digits) {
+    return v.empty() ? std::string("—") : fixed(median(v), digits);
+  };
+  std::cout << "# Dense stereo benchmark\n\n"
+            << "- date: " << today() << "\n"
+            << "- machine: " << nproc << " cores (nproc), " << cpuModel() << ", OpenCV " << CV_VERSION << " with "
+            << cv::getNumThreads() << " threads; load average at the end " << loadAverage() << "\n"
+            << "- command: `" << cmd << "`\n"
+            << "- bag: " << bag_path << ", " << pairs << " stereo pair(s) of " << size.width << "x"
+            << size.height << " (median over the pairs; no warm-up run)\n"
+            << "- disparity range for z " << fixed(z_min, 2) << " ... " << fixed(z_max, 2) << " m: "
+            << fixed(range.first, 1) << " ... " << fixed(range.second, 1) << " px (plain SGBM: " << num
+            << " disparities)\n"
+            << "- rectify (remap of both raw images): " << cell(rectify_ms, 0) << " ms per pair\n\n";
+  std::cout << "| input | method | prepare ms | sgbm ms | refine ms | disparity total ms | triangulate ms | valid % | "
+               "note |\n|---|---|---:|---:|---:|---:|---:|---:|---|\n";
+  for (const Row& r : rows) {
+    const bool ran = !r.total.empty();
+    std::cout << "| " << r.input << " | " << r.method << " | " << (ran ? cell(r.prepare, 0) : "—") << " | "
+              << (ran ? cell(r.sgbm, 0) : "—") << " | " << cell(r.refine, 0) << " | " << cell(r.total, 0) << " | "
+              << cell(r.triangulate, 0) << " | " << (ran ? fixed(100 * median(r.valid), 1) : "—") << " | " << r.note
+              << " |\n";
+  }
+  std::cout << "\nplain SGBM: block 5, P1 = 200, P2 = 800, other parameters OpenCV's defaults (no left-right check, "
+               "no speckle filter), 1/16 px; its prepare = cropping the region plus the search width; valid = "
+               "pixels of the region with a disparity.\n";
+  for (const std::string& w : warnings) std::cout << "- warning: " << w << "\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -219,50 +337,8 @@ int main(int argc, char** argv) {
   // Read the pairs (matched by stamp) and the first camera_info of each side.
   std::vector<std::pair<cv::Mat, cv::Mat>> frames;
   geometry::CameraInfo li, ri;
-  bool have_li = false, have_ri = false;
-  try {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    const ros_io::BagTopics topics(bag, bag_path,
-                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                                    "stereo/right/camera_info"},
-                                   bag_ns);
-    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
-    std::map<ros::Time, std::pair<cv::Mat, cv::Mat>> pending;
-    for (const rosbag::MessageInstance& m : view) {
-      if (static_cast<long>(frames.size()) >= frames_wanted && have_li && have_ri) break;
-      const std::string topic = topics.relative(m.getTopic());
-      if (topic == "stereo/left/camera_info" && !have_li) {
-        li = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_li = true;
-      } else if (topic == "stereo/right/camera_info" && !have_ri) {
-        ri = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_ri = true;
-      } else if ((topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") &&
-                 static_cast<long>(frames.size()) < frames_wanted) {
-        const auto img = m.instantiate<sensor_msgs::Image>();
-        auto& p = pending[img->header.stamp];
-        (topic == "stereo/left/image_raw" ? p.first : p.second) = ros_conv::toMono8(*img);
-        if (!p.first.empty() && !p.second.empty()) {
-          frames.push_back(p);
-          pending.erase(img->header.stamp);
-        }
-      }
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "bench_dense: cannot read " << bag_path << ": " << e.what() << "\n";
-    return 1;
-  }
-  if (frames.empty() || !have_li || !have_ri) {
-    std::cerr << "bench_dense: " << bag_path
-              << " has no stereo/{left,right}/image_raw pairs with equal stamps or no stereo/{left,right}/camera_info\n";
-    return 1;
-  }
+  if (const int code = readPairs(bag_path, bag_ns, frames_wanted, &frames, &li, &ri)) return code;
   const cv::Size size = frames[0].first.size();
-  if (li.width != size.width || li.height != size.height) {
-    std::cerr << "bench_dense: camera_info size " << li.width << "x" << li.height << " differs from the images' "
-              << size.width << "x" << size.height << "\n";
-    return 1;
-  }
 
   std::pair<double, double> range;
   try {
@@ -276,39 +352,17 @@ int main(int argc, char** argv) {
   const cv::Size rs(static_cast<int>(std::lround(size.width * scale)), static_cast<int>(std::lround(size.height * scale)));
   const cv::Rect roi((size.width - rs.width) / 2, (size.height - rs.height) / 2, rs.width, rs.height);
 
-  struct Input {
-    std::string name;
-    cv::Rect roi;
-  };
+  struct Input { std::string name; cv::Rect roi; };  // a named region (empty roi: the whole image)
   std::vector<Input> inputs;
   if (full) inputs.push_back({"full " + std::to_string(size.width) + "x" + std::to_string(size.height), cv::Rect()});
   if (roi_mp > 0) {
     inputs.push_back({"image centre " + std::to_string(roi.width) + "x" + std::to_string(roi.height), roi});
-    // A strongly converged rig rectified with flags 0 may put the working area far from the image centre: a
-    // second region of the same size centred on the textured part of the first left rectified image.
     try {
-      const cv::Mat left = stereo::Rectifier(li)(frames[0].first);
-      cv::Mat small, f, mean, sq;
-      const double k = std::max(1.0, size.width / 512.0);
-      cv::resize(left, small, cv::Size(), 1.0 / k, 1.0 / k, cv::INTER_AREA);
-      small.convertTo(f, CV_32F);
-      cv::boxFilter(f, mean, CV_32F, cv::Size(7, 7));
-      cv::boxFilter(f.mul(f), sq, CV_32F, cv::Size(7, 7));
-      const cv::Mat stddev_sq = sq - mean.mul(mean);
-      const cv::Mat textured = stddev_sq > 8.0 * 8.0;  // grey levels
-      const cv::Moments mo = cv::moments(textured, true);
-      if (mo.m00 > 0) {
-        const cv::Point2d c(k * mo.m10 / mo.m00, k * mo.m01 / mo.m00);
-        cv::Rect t(static_cast<int>(std::lround(c.x - roi.width / 2.0)),
-                   static_cast<int>(std::lround(c.y - roi.height / 2.0)), roi.width, roi.height);
-        t.x = std::clamp(t.x, 0, size.width - t.width);
-        t.y = std::clamp(t.y, 0, size.height - t.height);
-        inputs.push_back({"textured area " + std::to_string(t.width) + "x" + std::to_string(t.height) + " at (" +
-                              std::to_string(t.x) + ", " + std::to_string(t.y) + ")",
-                          t});
-      } else {
+      const auto t = texturedRegion(li, frames[0].first, roi);
+      if (t)
+        inputs.push_back({t->first, t->second});
+      else
         std::cerr << "bench_dense: no textured area found in the first left image: no second region\n";
-      }
     } catch (const std::exception& e) {
       std::cerr << "bench_dense: " << e.what() << "\n";
       return 1;
@@ -369,35 +423,6 @@ int main(int argc, char** argv) {
     return 1;
   }
 
-  const long nproc = sysconf(_SC_NPROCESSORS_ONLN);
-  std::string cmd;
-  for (int i = 0; i < argc; ++i) cmd += (i ? " " : "") + std::string(i ? argv[i] : "bench_dense");
-  auto cell = [](const std::vector<double>& v, int digits) {
-    return v.empty() ? std::string("—") : fixed(median(v), digits);
-  };
-  std::cout << "# Dense stereo benchmark\n\n"
-            << "- date: " << today() << "\n"
-            << "- machine: " << nproc << " cores (nproc), " << cpuModel() << ", OpenCV " << CV_VERSION << " with "
-            << cv::getNumThreads() << " threads; load average at the end " << loadAverage() << "\n"
-            << "- command: `" << cmd << "`\n"
-            << "- bag: " << bag_path << ", " << frames.size() << " stereo pair(s) of " << size.width << "x"
-            << size.height << " (median over the pairs; no warm-up run)\n"
-            << "- disparity range for z " << fixed(z_min, 2) << " ... " << fixed(z_max, 2) << " m: "
-            << fixed(range.first, 1) << " ... " << fixed(range.second, 1) << " px (plain SGBM: " << num
-            << " disparities)\n"
-            << "- rectify (remap of both raw images): " << cell(rectify_ms, 0) << " ms per pair\n\n";
-  std::cout << "| input | method | prepare ms | sgbm ms | refine ms | disparity total ms | triangulate ms | valid % | "
-               "note |\n|---|---|---:|---:|---:|---:|---:|---:|---|\n";
-  for (const Row& r : rows) {
-    const bool ran = !r.total.empty();
-    std::cout << "| " << r.input << " | " << r.method << " | " << (ran ? cell(r.prepare, 0) : "—") << " | "
-              << (ran ? cell(r.sgbm, 0) : "—") << " | " << cell(r.refine, 0) << " | " << cell(r.total, 0) << " | "
-              << cell(r.triangulate, 0) << " | " << (ran ? fixed(100 * median(r.valid), 1) : "—") << " | " << r.note
-              << " |\n";
-  }
-  std::cout << "\nplain SGBM: block 5, P1 = 200, P2 = 800, other parameters OpenCV's defaults (no left-right check, "
-               "no speckle filter), 1/16 px; its prepare = cropping the region plus the search width; valid = "
-               "pixels of the region with a disparity.\n";
-  for (const std::string& w : warnings) std::cout << "- warning: " << w << "\n";
+  printReport(argc, argv, bag_path, frames.size(), size, z_min, z_max, range, num, rectify_ms, rows, warnings);
   return 0;
 }

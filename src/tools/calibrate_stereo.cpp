@@ -153,6 +153,92 @@ bool writeText(const std::string& path, const std::string& text) {
   return static_cast<bool>(out);
 }
 
+/** The image pairs of `images` (left and right files with the same key, naturally sorted); files without a
+ *  partner are listed. @return 0, or 1 (with a message) when the folder is unreadable or has no pair. */
+int findPairs(const std::string& images, const Glob& lg, const Glob& rg, const std::string& left_glob,
+              const std::string& right_glob, std::vector<skin3d::stereo::ImagePair>* out) {
+  std::vector<skin3d::stereo::ImagePair>& pairs = *out;
+  std::error_code ec;
+  if (!fs::is_directory(images, ec)) {
+    std::cerr << "calibrate_stereo: --images '" << images << "' is not a readable directory\n";
+    return 1;
+  }
+  const auto lefts = listMatches(images, lg), rights = listMatches(images, rg);
+  std::vector<std::string> keys;
+  std::vector<std::string> unpaired;
+  for (const auto& [key, file] : lefts) {
+    if (rights.count(key))
+      keys.push_back(key);
+    else
+      unpaired.push_back(file);
+  }
+  for (const auto& [key, file] : rights)
+    if (!lefts.count(key)) unpaired.push_back(file);
+  std::sort(keys.begin(), keys.end(), naturalLess);
+  std::sort(unpaired.begin(), unpaired.end(), naturalLess);
+  if (!unpaired.empty()) {
+    std::cerr << "calibrate_stereo: " << unpaired.size() << " image(s) without a partner, ignored:";
+    for (const auto& f : unpaired) std::cerr << " " << f;
+    std::cerr << "\n";
+  }
+  if (keys.empty()) {
+    std::cerr << "calibrate_stereo: no image pairs in '" << images << "': expected image files matching '" << left_glob
+              << "' and '" << right_glob << "' with the same key (e.g. left01.jpg + right01.jpg); " << lefts.size()
+              << " left and " << rights.size() << " right image(s) found; see --left-glob/--right-glob\n";
+    return 1;
+  }
+  for (const auto& k : keys)
+    pairs.push_back(
+        {displayKey(k), (fs::path(images) / lefts.at(k)).string(), (fs::path(images) / rights.at(k)).string()});
+
+  return 0;
+}
+
+/** left.yaml, right.yaml, report.yaml and rectified_preview.png (of the first pair used) in out_dir.
+ *  @return 0, 1 (the preview failed) or 3 (a file cannot be written). */
+int writeOutputs(const skin3d::stereo::StereoCalibration& calib, const std::vector<skin3d::stereo::SkippedPair>& skipped,
+                 const std::vector<skin3d::stereo::ImagePair>& pairs, const skin3d::stereo::StereoCorners& corners,
+                 const std::string& out_dir, const std::string& left_name, const std::string& right_name, bool quiet,
+                 double seconds) {
+  const std::string left_yaml = out_dir + "/left.yaml", right_yaml = out_dir + "/right.yaml",
+                    report_yaml = out_dir + "/report.yaml", preview_png = out_dir + "/rectified_preview.png";
+  for (const auto& [path, text] :
+       {std::make_pair(left_yaml, skin3d::stereo::cameraInfoYaml(calib.left, left_name)),
+        std::make_pair(right_yaml, skin3d::stereo::cameraInfoYaml(calib.right, right_name)),
+        std::make_pair(report_yaml, skin3d::stereo::calibrationReportYaml(calib, skipped))}) {
+    if (!writeText(path, text)) {
+      std::cerr << "calibrate_stereo: cannot write " << path << ": " << std::strerror(errno) << "\n";
+      return 3;
+    }
+  }
+  // Preview of the first used pair.
+  const auto it = std::find_if(pairs.begin(), pairs.end(),
+                               [&](const skin3d::stereo::ImagePair& p) { return p.name == corners.names.front(); });
+  const cv::Mat l = cv::imread(it->left_path, cv::IMREAD_COLOR), r = cv::imread(it->right_path, cv::IMREAD_COLOR);
+  cv::Mat preview;
+  try {
+    preview = skin3d::stereo::drawRectifiedPreview(calib, l, r, corners.left.front(), corners.right.front());
+  } catch (const std::exception& e) {
+    std::cerr << "calibrate_stereo: preview of pair " << it->name << ": " << e.what() << "\n";
+    return 1;
+  }
+  bool ok = false;
+  try {
+    ok = cv::imwrite(preview_png, preview);
+  } catch (const cv::Exception&) {
+    ok = false;
+  }
+  if (!ok) {
+    std::cerr << "calibrate_stereo: cannot write " << preview_png << "\n";
+    return 3;
+  }
+  if (!quiet)
+    std::cout << "wrote " << left_yaml << ", " << right_yaml << ", " << report_yaml << ", " << preview_png
+              << " (preview: pair " << it->name << "; corners and calibration took " << std::fixed
+              << std::setprecision(1) << seconds << " s)\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -229,39 +315,8 @@ int main(int argc, char** argv) {
   if (pattern.square_m < 1e-3)
     std::cerr << "calibrate_stereo: warning: --square " << square_text
               << " is read as less than 1 mm (a bare number is millimetres; write e.g. 0.025m for metres)\n";
-  std::error_code ec;
-  if (!fs::is_directory(images, ec)) {
-    std::cerr << "calibrate_stereo: --images '" << images << "' is not a readable directory\n";
-    return 1;
-  }
-  const auto lefts = listMatches(images, lg), rights = listMatches(images, rg);
-  std::vector<std::string> keys;
-  std::vector<std::string> unpaired;
-  for (const auto& [key, file] : lefts) {
-    if (rights.count(key))
-      keys.push_back(key);
-    else
-      unpaired.push_back(file);
-  }
-  for (const auto& [key, file] : rights)
-    if (!lefts.count(key)) unpaired.push_back(file);
-  std::sort(keys.begin(), keys.end(), naturalLess);
-  std::sort(unpaired.begin(), unpaired.end(), naturalLess);
-  if (!unpaired.empty()) {
-    std::cerr << "calibrate_stereo: " << unpaired.size() << " image(s) without a partner, ignored:";
-    for (const auto& f : unpaired) std::cerr << " " << f;
-    std::cerr << "\n";
-  }
-  if (keys.empty()) {
-    std::cerr << "calibrate_stereo: no image pairs in '" << images << "': expected image files matching '" << left_glob
-              << "' and '" << right_glob << "' with the same key (e.g. left01.jpg + right01.jpg); " << lefts.size()
-              << " left and " << rights.size() << " right image(s) found; see --left-glob/--right-glob\n";
-    return 1;
-  }
   std::vector<skin3d::stereo::ImagePair> pairs;
-  for (const auto& k : keys)
-    pairs.push_back(
-        {displayKey(k), (fs::path(images) / lefts.at(k)).string(), (fs::path(images) / rights.at(k)).string()});
+  if (const int code = findPairs(images, lg, rg, left_glob, right_glob, &pairs)) return code;
 
   // ---- output folder first, so that a bad --out fails before the work (exit 3)
   if (!makeDirs(out_dir) || access(out_dir.c_str(), W_OK) != 0) {
@@ -310,41 +365,7 @@ int main(int argc, char** argv) {
   if (!quiet) std::cout << skin3d::stereo::calibrationReportTable(calib, skipped);
 
   // ---- outputs
-  const std::string left_yaml = out_dir + "/left.yaml", right_yaml = out_dir + "/right.yaml",
-                    report_yaml = out_dir + "/report.yaml", preview_png = out_dir + "/rectified_preview.png";
-  for (const auto& [path, text] :
-       {std::make_pair(left_yaml, skin3d::stereo::cameraInfoYaml(calib.left, left_name)),
-        std::make_pair(right_yaml, skin3d::stereo::cameraInfoYaml(calib.right, right_name)),
-        std::make_pair(report_yaml, skin3d::stereo::calibrationReportYaml(calib, skipped))}) {
-    if (!writeText(path, text)) {
-      std::cerr << "calibrate_stereo: cannot write " << path << ": " << std::strerror(errno) << "\n";
-      return 3;
-    }
-  }
-  // Preview of the first used pair.
-  const auto it = std::find_if(pairs.begin(), pairs.end(),
-                               [&](const skin3d::stereo::ImagePair& p) { return p.name == corners.names.front(); });
-  const cv::Mat l = cv::imread(it->left_path, cv::IMREAD_COLOR), r = cv::imread(it->right_path, cv::IMREAD_COLOR);
-  cv::Mat preview;
-  try {
-    preview = skin3d::stereo::drawRectifiedPreview(calib, l, r, corners.left.front(), corners.right.front());
-  } catch (const std::exception& e) {
-    std::cerr << "calibrate_stereo: preview of pair " << it->name << ": " << e.what() << "\n";
-    return 1;
-  }
-  bool ok = false;
-  try {
-    ok = cv::imwrite(preview_png, preview);
-  } catch (const cv::Exception&) {
-    ok = false;
-  }
-  if (!ok) {
-    std::cerr << "calibrate_stereo: cannot write " << preview_png << "\n";
-    return 3;
-  }
-  if (!quiet)
-    std::cout << "wrote " << left_yaml << ", " << right_yaml << ", " << report_yaml << ", " << preview_png
-              << " (preview: pair " << it->name << "; corners and calibration took " << std::fixed
-              << std::setprecision(1) << seconds << " s)\n";
+  if (const int code = writeOutputs(calib, skipped, pairs, corners, out_dir, left_name, right_name, quiet, seconds))
+    return code;
   return 0;
 }

@@ -109,7 +109,9 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   return p;
 }
 
-int run(const Args& a) {
+/** The SLAM options of a run: config/slam.yaml's defaults, the front end's association distance, --config
+ *  files, --gyro, --set, validated. */
+slam::SlamOptions slamOptionsOf(const Args& a) {
   slam::SlamOptions opt;
   // Binary descriptors (AKAZE, ORB: one float 0/1 per bit, L2 = sqrt(Hamming)) need a wider association
   // distance than KAZE's unit-norm floats (config/slam.yaml's 0.3 accepts only identical bit strings):
@@ -119,6 +121,34 @@ int run(const Args& a) {
   if (a.gyro) opt.use_gyro = true;
   for (const auto& kv : a.sets) slam::setSlamOption(&opt, kv.first, kv.second);
   opt.validate();
+  return opt;
+}
+
+/** Whether the run takes the bag's stereo images through the front end (else its stereo/landmarks), from what
+ *  the bag holds and --input; throws std::invalid_argument naming what is missing. */
+bool useImages(const Args& a, const ros_io::BagTopics& topics) {
+  const bool have_images = topics.has("stereo/left/image_raw") && topics.has("stereo/right/image_raw");
+  const bool have_landmarks = topics.has("stereo/landmarks");
+  bool use_images = have_images;
+  if (a.input == "landmarks") use_images = false;
+  if (a.input == "images" && !have_images)
+    throw std::invalid_argument("--input images: '" + a.bag + "' has no stereo/{left,right}/image_raw (" +
+                                topics.summary() + ")");
+  if (a.input == "landmarks" && !have_landmarks)
+    throw std::invalid_argument("--input landmarks: '" + a.bag + "' has no stereo/landmarks (" + topics.summary() + ")");
+  if (!use_images && !have_landmarks)
+    throw std::invalid_argument("'" + a.bag + "' has neither stereo/landmarks nor both stereo/{left,right}/image_raw (" +
+                                topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
+  if (!a.quiet) {
+    std::fprintf(stderr, "process_bag: %s; input: %s%s\n", topics.summary().c_str(),
+                 use_images ? "stereo images through the front end" : "stereo/landmarks",
+                 use_images && have_landmarks ? " (the recorded stereo/landmarks are not used: --input landmarks)" : "");
+  }
+  return use_images;
+}
+
+int run(const Args& a) {
+  const slam::SlamOptions opt = slamOptionsOf(a);
   slam::SlamSystem slam(opt);
 
   if (!a.known_map.empty()) {
@@ -137,23 +167,7 @@ int run(const Args& a) {
                                   "stereo/left/camera_info", "stereo/right/camera_info", "imu/data",
                                   "ground_truth/pose"},
                                  a.ns);
-  const bool have_images = topics.has("stereo/left/image_raw") && topics.has("stereo/right/image_raw");
-  const bool have_landmarks = topics.has("stereo/landmarks");
-  bool use_images = have_images;
-  if (a.input == "landmarks") use_images = false;
-  if (a.input == "images" && !have_images)
-    throw std::invalid_argument("--input images: '" + a.bag + "' has no stereo/{left,right}/image_raw (" +
-                                topics.summary() + ")");
-  if (a.input == "landmarks" && !have_landmarks)
-    throw std::invalid_argument("--input landmarks: '" + a.bag + "' has no stereo/landmarks (" + topics.summary() + ")");
-  if (!use_images && !have_landmarks)
-    throw std::invalid_argument("'" + a.bag + "' has neither stereo/landmarks nor both stereo/{left,right}/image_raw (" +
-                                topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
-  if (!a.quiet) {
-    std::fprintf(stderr, "process_bag: %s; input: %s%s\n", topics.summary().c_str(),
-                 use_images ? "stereo images through the front end" : "stereo/landmarks",
-                 use_images && have_landmarks ? " (the recorded stereo/landmarks are not used: --input landmarks)" : "");
-  }
+  const bool use_images = useImages(a, topics);
   std::vector<std::string> read = topics.stored();
   read.erase(std::remove_if(read.begin(), read.end(),
                             [&](const std::string& t) {

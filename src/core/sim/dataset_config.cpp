@@ -206,23 +206,10 @@ void makeIdeal(DatasetConfig* c) {
   c->images.perturbation.enabled = false;
 }
 
-void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::ParserException& e) {
-    throw SimConfigError("(file)", "cannot parse " + source + " as YAML: line " + std::to_string(e.mark.line + 1) +
-                                       ", column " + std::to_string(e.mark.column + 1) + ": " + e.msg);
-  }
-  c->source = source;
-  if (!root || root.IsNull()) return;  // an empty file changes nothing
-  const Section top(root, "", {"seed", "globe", "gyro", "rig", "workpiece", "skin", "images"});
-  if (top.has("seed")) {
-    const double s = top.number("seed", false);
-    if (s < 0 || std::floor(s) != s) bad("seed", s, "must be a whole number >= 0");
-    c->seed = static_cast<std::uint64_t>(s);
-  }
-  GlobeConfig& g = c->globe;
+namespace {
+
+/** The globe and gyro sections. */
+void readGlobe(const Section& top, GlobeConfig& g) {
   const Section gs = top.sub("globe", false,
                              {"radius_mm", "distance_mm", "latitude_deg", "tilt_deg", "rate_rad_s", "frames", "fps",
                               "landmarks", "descriptor_size", "descriptor_noise", "lookalike_fraction",
@@ -249,13 +236,10 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   if (!bias.empty()) g.gyro_bias = Eigen::Vector3d(bias[0], bias[1], bias[2]);
   g.gyro_bias_walk = gy.number("bias_walk", false, g.gyro_bias_walk);
 
-  const std::set<std::string> rig_keys = {"focal_length_mm", "pixel_size_um",   "width_px",  "height_px",
-                                          "baseline_mm",     "convergence_deg", "distortion"};
-  // `rig` applies to the kind's own rig: the SLAM rig for the globe, the Part I rig for the workpiece.
-  const Section rs = top.sub("rig", false, rig_keys);
-  readRig(rs, c->kind == DatasetKind::Workpiece ? &c->workpiece.rig : c->kind == DatasetKind::Skin ? &c->skin.rig : &g.rig);
+}
 
-  WorkpieceConfig& w = c->workpiece;
+/** The workpiece section. */
+void readWorkpiece(const Section& top, WorkpieceConfig& w) {
   const Section ws = top.sub("workpiece", false,
                              {"plate_size_mm", "plateaus", "working_distance_mm", "tilt_deg", "resolution_scale",
                               "frames", "fps", "texel_um"});
@@ -279,7 +263,10 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   w.fps = ws.number("fps", false, w.fps);
   w.texel = ws.number("texel_um", false, w.texel * 1e6) * 1e-6;
 
-  SkinConfig& k = c->skin;
+}
+
+/** The skin section (limb, plaques, pose, imaging). */
+void readSkin(const Section& top, SkinConfig& k) {
   const Section ks = top.sub("skin", false,
                              {"random", "plaque_count", "dome_max", "limb", "plaques", "yaw_deg", "tilt_deg", "roll_deg",
                               "max_yaw_deg", "max_tilt_deg", "max_roll_deg", "working_distance_mm", "resolution_scale",
@@ -324,7 +311,10 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   k.contrast = ks.number("contrast", false, k.contrast);
   k.scale_texture = ks.boolean("scale_texture", k.scale_texture);
 
-  ImageConfig& im = c->images;
+}
+
+/** The images section (realism, photometry, calibration error); returns the section for its "ideal" key. */
+Section readImages(const Section& top, ImageConfig& im) {
   const Section is =
       top.sub("images", false,
               {"ideal", "supersample", "realism", "left", "right", "calibration_error", "light_elevation_deg"});
@@ -363,6 +353,37 @@ void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std:
   im.perturbation.rotation = ce.number("rotation_deg", false, im.perturbation.rotation / kDeg) * kDeg;
   im.perturbation.principal_point = ce.number("principal_point_px", false, im.perturbation.principal_point);
   im.perturbation.focal_rel = ce.number("focal_rel", false, im.perturbation.focal_rel);
+  return is;
+}
+
+}  // namespace
+
+void applyDatasetYaml(DatasetConfig* c, const std::string& yaml_text, const std::string& source) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    throw SimConfigError("(file)", "cannot parse " + source + " as YAML: line " + std::to_string(e.mark.line + 1) +
+                                       ", column " + std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  c->source = source;
+  if (!root || root.IsNull()) return;  // an empty file changes nothing
+  const Section top(root, "", {"seed", "globe", "gyro", "rig", "workpiece", "skin", "images"});
+  if (top.has("seed")) {
+    const double s = top.number("seed", false);
+    if (s < 0 || std::floor(s) != s) bad("seed", s, "must be a whole number >= 0");
+    c->seed = static_cast<std::uint64_t>(s);
+  }
+  readGlobe(top, c->globe);
+  const std::set<std::string> rig_keys = {"focal_length_mm", "pixel_size_um",   "width_px",  "height_px",
+                                          "baseline_mm",     "convergence_deg", "distortion"};
+  // `rig` applies to the kind's own rig: the SLAM rig for the globe, the Part I rig for the workpiece.
+  const Section rs = top.sub("rig", false, rig_keys);
+  readRig(rs, c->kind == DatasetKind::Workpiece ? &c->workpiece.rig : c->kind == DatasetKind::Skin ? &c->skin.rig : &c->globe.rig);
+
+  readWorkpiece(top, c->workpiece);
+  readSkin(top, c->skin);
+  const Section is = readImages(top, c->images);
   if (is.boolean("ideal", false)) makeIdeal(c);
   validateDatasetConfig(*c);
 }

@@ -280,8 +280,10 @@ std::vector<cv::Point2f> rectifyPixels(const geometry::CameraInfo& info, const s
   return out;
 }
 
-StereoCalibration calibrateStereo(const StereoCorners& corners, const ChessboardPattern& pattern,
-                                  const CalibrationOptions& options) {
+namespace {
+
+/** The calibration's inputs checked: as many corner lists as names, a board, enough pairs, full corner lists. */
+void checkCalibrationInput(const StereoCorners& corners, const ChessboardPattern& pattern, const CalibrationOptions& options) {
   const size_t n = corners.names.size();
   if (corners.left.size() != n || corners.right.size() != n)
     fail("corners", "calibration: " + std::to_string(n) + " pair names but " + std::to_string(corners.left.size()) +
@@ -306,6 +308,73 @@ StereoCalibration calibrateStereo(const StereoCorners& corners, const Chessboard
                             " corners in one image, the " + std::to_string(pattern.cols) + "x" +
                             std::to_string(pattern.rows) + " board has " + std::to_string(pattern.corners()));
 
+}
+
+/**
+ * Rectification of the calibrated rig (DESIGN.md: a strongly converged rig loses its scene with
+ * CALIB_ZERO_DISPARITY): as ROS camera_calibration for a near-parallel rig; for a converged one, alpha 0 when it
+ * keeps every board corner inside, else a rectified projection fitted to keep them (out.rectification_note says
+ * which, out.projection_fitted whether fitted).
+ */
+RectifiedPair chooseRectification(StereoCalibration& out, const CalibrationOptions& options) {
+  out.converged = out.axes_angle_rad > options.converged_threshold_rad;
+  RectifiedPair rect;
+  if (!out.converged) {
+    rect = rectifyStereo(out.rig);
+    out.rectification_note = "near-parallel rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) +
+                             " deg <= " + fixed(options.converged_threshold_rad * kRadToDeg, 1) +
+                             " deg): CALIB_ZERO_DISPARITY, alpha 0 (as ROS camera_calibration)";
+  } else {
+    const std::string head =
+        "strongly converged rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) + " deg): ";
+    bool at_alpha0 = false;
+    try {
+      rect = rectifyStereo(out.rig, out.board_points);
+      at_alpha0 = rect.alpha == 0.0;
+    } catch (const std::runtime_error&) {
+      // No alpha keeps every corner inside: the rotations are all that is needed from here on.
+      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+      for (const auto& X : out.board_points) centroid += X;
+      centroid /= static_cast<double>(out.board_points.size());
+      try {
+        rect = rectifyStereo(out.rig, {centroid});
+      } catch (const std::runtime_error&) {
+        rect = rectifyStereo(out.rig);
+      }
+    }
+    if (at_alpha0) {
+      out.rectification_note = head + "flags 0, alpha 0 keeps all " + std::to_string(out.board_points.size()) +
+                               " board corners inside both rectified images";
+    } else {
+      RectifiedPair fitted = rect;
+      // Focal length at most the raw cameras' (mean of fx, fy of both): no zoom beyond the raw resolution.
+      const double f_raw =
+          0.25 * (out.rig.left().fx() + out.rig.left().fy() + out.rig.right().fx() + out.rig.right().fy());
+      if (fitRectifiedProjection(&fitted, out.board_points, f_raw, 2.0)) {
+        rect = fitted;
+        out.projection_fitted = true;
+        out.rectification_note =
+            head +
+            "flags 0; alpha 0 loses board corners and OpenCV's alpha > 0 degenerates for this rig, so the "
+            "rectified P (focal " +
+            fixed(rect.left.P(0, 0), 1) + " px, at most the raw one; a cx per camera) is fitted to keep all " +
+            std::to_string(out.board_points.size()) + " board corners inside both images";
+      } else {
+        out.rectification_note = head + (rect.zero_disparity ? "CALIB_ZERO_DISPARITY" : "flags 0") + ", alpha " +
+                                 fixed(rect.alpha, 2) +
+                                 "; some board corners are not in front of both rectified cameras";
+      }
+    }
+  }
+  return rect;
+}
+
+}  // namespace
+
+StereoCalibration calibrateStereo(const StereoCorners& corners, const ChessboardPattern& pattern,
+                                  const CalibrationOptions& options) {
+  checkCalibrationInput(corners, pattern, options);
+  const size_t n = corners.names.size();
   StereoCalibration out;
   out.pattern = pattern;
   out.image_size = corners.image_size;
@@ -369,56 +438,7 @@ StereoCalibration calibrateStereo(const StereoCorners& corners, const Chessboard
     for (const auto& X : object[i]) out.board_points.push_back(eRb * Eigen::Vector3d(X.x, X.y, X.z) + etb);
   }
 
-  // Rectification (DESIGN.md: a strongly converged rig loses its scene with CALIB_ZERO_DISPARITY).
-  out.converged = out.axes_angle_rad > options.converged_threshold_rad;
-  RectifiedPair rect;
-  if (!out.converged) {
-    rect = rectifyStereo(out.rig);
-    out.rectification_note = "near-parallel rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) +
-                             " deg <= " + fixed(options.converged_threshold_rad * kRadToDeg, 1) +
-                             " deg): CALIB_ZERO_DISPARITY, alpha 0 (as ROS camera_calibration)";
-  } else {
-    const std::string head =
-        "strongly converged rig (axes angle " + fixed(out.axes_angle_rad * kRadToDeg, 2) + " deg): ";
-    bool at_alpha0 = false;
-    try {
-      rect = rectifyStereo(out.rig, out.board_points);
-      at_alpha0 = rect.alpha == 0.0;
-    } catch (const std::runtime_error&) {
-      // No alpha keeps every corner inside: the rotations are all that is needed from here on.
-      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-      for (const auto& X : out.board_points) centroid += X;
-      centroid /= static_cast<double>(out.board_points.size());
-      try {
-        rect = rectifyStereo(out.rig, {centroid});
-      } catch (const std::runtime_error&) {
-        rect = rectifyStereo(out.rig);
-      }
-    }
-    if (at_alpha0) {
-      out.rectification_note = head + "flags 0, alpha 0 keeps all " + std::to_string(out.board_points.size()) +
-                               " board corners inside both rectified images";
-    } else {
-      RectifiedPair fitted = rect;
-      // Focal length at most the raw cameras' (mean of fx, fy of both): no zoom beyond the raw resolution.
-      const double f_raw =
-          0.25 * (out.rig.left().fx() + out.rig.left().fy() + out.rig.right().fx() + out.rig.right().fy());
-      if (fitRectifiedProjection(&fitted, out.board_points, f_raw, 2.0)) {
-        rect = fitted;
-        out.projection_fitted = true;
-        out.rectification_note =
-            head +
-            "flags 0; alpha 0 loses board corners and OpenCV's alpha > 0 degenerates for this rig, so the "
-            "rectified P (focal " +
-            fixed(rect.left.P(0, 0), 1) + " px, at most the raw one; a cx per camera) is fitted to keep all " +
-            std::to_string(out.board_points.size()) + " board corners inside both images";
-      } else {
-        out.rectification_note = head + (rect.zero_disparity ? "CALIB_ZERO_DISPARITY" : "flags 0") + ", alpha " +
-                                 fixed(rect.alpha, 2) +
-                                 "; some board corners are not in front of both rectified cameras";
-      }
-    }
-  }
+  const RectifiedPair rect = chooseRectification(out, options);
   out.zero_disparity = rect.zero_disparity;
   out.alpha = rect.alpha;
   out.left = rect.left;

@@ -21,10 +21,6 @@
  * (no texture, little overlap) are throttled warnings.
  */
 #include <cv_bridge/cv_bridge.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -34,6 +30,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/stereo_sync.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/stereo/dense_stereo.h"
@@ -44,9 +41,6 @@ using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
 class DenseStereoNodelet : public nodelet::Nodelet {
-  using Exact = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
-  using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
-
   void onInit() override {
     keepLargeBuffers();  // process-wide: full-resolution buffers from the heap, not fresh mmap()s
     ros::NodeHandle& nh = getNodeHandle();
@@ -54,30 +48,15 @@ class DenseStereoNodelet : public nodelet::Nodelet {
     std::vector<std::string> errors;
     options_ = ros_conv::loadPipelineOptions(pnh, &errors);
     for (const auto& e : errors) NODELET_ERROR("dense_stereo: %s", e.c_str());
-    bool approx = false;
-    int queue = 5;
-    pnh.param("approximate_sync", approx, false);
-    pnh.param("queue_size", queue, 5);
     pnh.param<std::string>("frame_id", frame_id_, "stereo_left_optical_frame");
-    if (queue < 1) {
-      NODELET_ERROR("dense_stereo: ~queue_size = %d must be >= 1; using 5", queue);
-      queue = 5;
-    }
     if (nh.getNamespace() == "/")
       NODELET_WARN("dense_stereo: started in the global namespace; topics are stereo/...; usually it runs in a rig namespace");
     pub_points_ = nh.advertise<sensor_msgs::PointCloud2>("induration/points", 2);
     pub_disparity_ = nh.advertise<Image>("dense_stereo/disparity", 2);
-    sub_li_.subscribe(nh, "stereo/left/image_rect", queue);
-    sub_lc_.subscribe(nh, "stereo/left/camera_info", queue);
-    sub_ri_.subscribe(nh, "stereo/right/image_rect", queue);
-    sub_rc_.subscribe(nh, "stereo/right/camera_info", queue);
-    if (approx) {
-      approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      approx_->registerCallback(&DenseStereoNodelet::callback, this);
-    } else {
-      exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      exact_->registerCallback(&DenseStereoNodelet::callback, this);
-    }
+    const auto on_pair = [this](const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
+                                const CameraInfo::ConstPtr& rc) { callback(li, lc, ri, rc); };
+    const std::string sync_problem = sync_.subscribe(nh, pnh, "image_rect", on_pair);
+    if (!sync_problem.empty()) NODELET_ERROR("dense_stereo: %s", sync_problem.c_str());
     NODELET_INFO("dense_stereo: depths %.3f ... %.3f m, semi-global '%s' (block %d), sub-pixel '%s'; cloud in '%s'",
                  options_.z_min, options_.z_max, options_.dense.sgbm_mode.c_str(), options_.dense.block_size,
                  options_.dense.subpixel.c_str(), frame_id_.c_str());
@@ -142,10 +121,7 @@ class DenseStereoNodelet : public nodelet::Nodelet {
   induration::PipelineOptions options_;
   std::string frame_id_;
   ros::Publisher pub_points_, pub_disparity_;
-  message_filters::Subscriber<Image> sub_li_, sub_ri_;
-  message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
-  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
-  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+  ros_conv::StereoSync sync_;
 };
 
 }  // namespace skin3d

@@ -17,10 +17,6 @@
  */
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
@@ -30,6 +26,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/stereo_sync.h"
 #include "skin3d/stereo/features.h"
 
 namespace skin3d {
@@ -38,9 +35,6 @@ using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
 class StereoFeaturesNodelet : public nodelet::Nodelet {
-  using Exact = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
-  using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
-
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
@@ -65,25 +59,13 @@ class StereoFeaturesNodelet : public nodelet::Nodelet {
       matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(stereo::FeatureOptions());
     }
     type_name_ = stereo::featureTypeName(matcher_->options().type);
-    bool approx = false;
-    int queue = 5;
-    pnh.param("approximate_sync", approx, false);
-    pnh.param("queue_size", queue, 5);
-    queue = std::max(1, queue);
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
     pub_matches_ = nh.advertise<skin3d::StereoMatchArray>("stereo/matches", 5);
     pub_debug_ = it_->advertise("stereo/matches_image", 1);
-    sub_li_.subscribe(nh, "stereo/left/image_rect", queue);
-    sub_lc_.subscribe(nh, "stereo/left/camera_info", queue);
-    sub_ri_.subscribe(nh, "stereo/right/image_rect", queue);
-    sub_rc_.subscribe(nh, "stereo/right/camera_info", queue);
-    if (approx) {
-      approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      approx_->registerCallback(&StereoFeaturesNodelet::callback, this);
-    } else {
-      exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      exact_->registerCallback(&StereoFeaturesNodelet::callback, this);
-    }
+    const auto on_pair = [this](const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
+                                const CameraInfo::ConstPtr& rc) { callback(li, lc, ri, rc); };
+    const std::string sync_problem = sync_.subscribe(nh, pnh, "image_rect", on_pair);
+    if (!sync_problem.empty()) NODELET_ERROR("stereo_features: %s", sync_problem.c_str());
     NODELET_INFO("stereo_features: %s features, ratio %.2f, row tolerance %.1f px", type_name_.c_str(),
                  matcher_->options().ratio, matcher_->options().max_row_diff);
   }
@@ -158,10 +140,7 @@ class StereoFeaturesNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_;
   ros::Publisher pub_matches_;
   image_transport::Publisher pub_debug_;
-  message_filters::Subscriber<Image> sub_li_, sub_ri_;
-  message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
-  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
-  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+  ros_conv::StereoSync sync_;
 };
 
 }  // namespace skin3d

@@ -17,10 +17,6 @@
  */
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
@@ -30,6 +26,7 @@
 #include <pluginlib/class_list_macros.hpp>
 
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/stereo_sync.h"
 #include "skin3d/stereo/rectification.h"
 
 namespace skin3d {
@@ -38,22 +35,11 @@ using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
 class StereoRectifyNodelet : public nodelet::Nodelet {
-  using Exact = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
-  using Approx = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
-
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    bool approx = false;
-    int queue = 5;
-    pnh.param("approximate_sync", approx, false);
-    pnh.param("queue_size", queue, 5);
     pnh.param("max_stamp_diff", max_stamp_diff_, 0.005);
     if (pnh.hasParam("interpolation")) NODELET_WARN("stereo_rectify: ~interpolation is no longer used (always bilinear)");
-    if (queue < 1) {
-      NODELET_WARN("stereo_rectify: ~queue_size = %d must be >= 1; using 5", queue);
-      queue = 5;
-    }
     if (nh.getNamespace() == "/")
       NODELET_WARN("stereo_rectify: started in the global namespace; topics are stereo/...; usually it runs in a rig namespace");
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
@@ -61,17 +47,10 @@ class StereoRectifyNodelet : public nodelet::Nodelet {
     pub_right_ = it_->advertise("stereo/right/image_rect", 1);
     pub_left_info_ = nh.advertise<CameraInfo>("stereo/left/camera_info_rect", 1);
     pub_right_info_ = nh.advertise<CameraInfo>("stereo/right/camera_info_rect", 1);
-    sub_li_.subscribe(nh, "stereo/left/image_raw", queue);
-    sub_lc_.subscribe(nh, "stereo/left/camera_info", queue);
-    sub_ri_.subscribe(nh, "stereo/right/image_raw", queue);
-    sub_rc_.subscribe(nh, "stereo/right/camera_info", queue);
-    if (approx) {
-      approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      approx_->registerCallback(&StereoRectifyNodelet::callback, this);
-    } else {
-      exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), sub_li_, sub_lc_, sub_ri_, sub_rc_);
-      exact_->registerCallback(&StereoRectifyNodelet::callback, this);
-    }
+    const auto on_pair = [this](const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
+                                const CameraInfo::ConstPtr& rc) { callback(li, lc, ri, rc); };
+    const std::string sync_problem = sync_.subscribe(nh, pnh, "image_raw", on_pair);
+    if (!sync_problem.empty()) NODELET_WARN("stereo_rectify: %s", sync_problem.c_str());
   }
 
   void callback(const Image::ConstPtr& li, const CameraInfo::ConstPtr& lc, const Image::ConstPtr& ri,
@@ -129,10 +108,7 @@ class StereoRectifyNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Publisher pub_left_, pub_right_;
   ros::Publisher pub_left_info_, pub_right_info_;
-  message_filters::Subscriber<Image> sub_li_, sub_ri_;
-  message_filters::Subscriber<CameraInfo> sub_lc_, sub_rc_;
-  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
-  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+  ros_conv::StereoSync sync_;
   CameraInfo left_info_, right_info_;
   std::unique_ptr<stereo::Rectifier> left_rect_, right_rect_;
   std::mutex mutex_;

@@ -51,7 +51,7 @@
 #include "process_bag_induration.h"
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/common/run_info.h"
-#include "stereo_pairs.h"
+#include "skin3d/ros/stereo_pairs.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/sphere_fit.h"
 #include "skin3d/slam/results.h"
@@ -182,7 +182,7 @@ int run(const Args& a) {
   std::vector<slam::StampedPose> trajectory, truth;
   std::vector<slam::StateRow> rows;
   std::unique_ptr<stereo::StereoFeatureMatcher> matcher;
-  tools::StereoPairs pairs_in;
+  ros_io::StereoPairs pairs_in;
   stereo::FeatureOptions fo;
   fo.type = stereo::parseFeatureType(a.features);
   const stereo::TriangulateOptions to;

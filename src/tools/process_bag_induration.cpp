@@ -28,7 +28,7 @@
 #include "skin3d/stereo/dense_stereo.h"
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/stereo/rectification.h"
-#include "stereo_pairs.h"
+#include "skin3d/ros/stereo_pairs.h"
 
 namespace skin3d {
 namespace tools {
@@ -58,7 +58,7 @@ int runInduration(const IndurationRun& a) {
   rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
   int expected = static_cast<int>(topics.count("stereo/left/image_raw"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
-  StereoPairs pairs_in;
+  ros_io::StereoPairs pairs_in;
   std::vector<induration::FrameRecord> records;
   stereo::DenseCloud last_cloud;
   cv::Mat last_left, last_disparity, last_sigma, last_unknown;

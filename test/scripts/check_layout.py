@@ -7,7 +7,7 @@ The house rules of issue 17, read from the source tree (text only, nothing is bu
   - no file under src/nodelets includes a file under src/tools, and no tool includes a nodelet file
     (what both need lives in skin3d_ros, include/skin3d/ros/, or in the core);
   - every nodelet file is at most 250 lines;
-  - no function in src/ is longer than 150 lines (from the line of its opening brace's statement to its
+  - no function in src/ (or bench/) is longer than 150 lines (from the line of its opening brace's statement to its
     closing brace; lambdas count in the function that holds them);
   - the core and the simulator (src/core, include/skin3d/ except ros/) include no ROS header.
 (That the measurement libraries do not link the simulator is enforced by the build: -Wl,--no-undefined.)
@@ -18,7 +18,9 @@ import argparse
 import os
 import re
 import sys
-import xml.etree.ElementTree as ET
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from xunit import write_xunit  # noqa: E402
 
 MAX_NODELET_LINES = 250
 MAX_FUNCTION_LINES = 150
@@ -152,7 +154,7 @@ def check(root):
     results.append(("nodelet_files_short", "; ".join(long_files)))
     # 3. functions at most 150 lines
     long_functions = []
-    for p in files(root, "src", (".cpp", ".h", ".hpp")):
+    for p in [q for folder in ("src", "bench") for q in files(root, folder, (".cpp", ".h", ".hpp"))]:
         for name, first, last in functions(open(p, encoding="utf-8").read()):
             if last - first + 1 > MAX_FUNCTION_LINES:
                 long_functions.append("%s:%d %s is %d lines (at most %d)" % (rel(root, p), first, name, last - first + 1,
@@ -200,17 +202,6 @@ def self_test():
     return ""
 
 
-def write_xunit(path, results):
-    suite = ET.Element("testsuite", name="layout", tests=str(len(results)),
-                       failures=str(sum(1 for _, m in results if m)), errors="0")
-    for name, msg in results:
-        case = ET.SubElement(suite, "testcase", classname="layout", name=name)
-        if msg:
-            ET.SubElement(case, "failure", message=msg).text = msg
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    ET.ElementTree(suite).write(path, encoding="utf-8", xml_declaration=True)
-
-
 def main():
     ap = argparse.ArgumentParser(usage=__doc__)
     ap.add_argument("--root", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
@@ -224,7 +215,7 @@ def main():
     for name, msg in results:
         print("layout: %s: %s" % (name, "FAIL: " + msg if msg else "ok"))
     if a.xunit:
-        write_xunit(a.xunit, results)
+        write_xunit(a.xunit, "layout", results)
     return 1 if any(m for _, m in results) else 0
 
 

@@ -33,11 +33,14 @@ import argparse
 import glob
 import importlib.util
 import os
+import xml.etree.ElementTree as ET
 import re
 import shutil
 import subprocess
 import sys
-import xml.etree.ElementTree as ET
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from xunit import write_xunit  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
 SYSTEM_PATH = "/usr/bin:/bin:/usr/sbin:/sbin"
@@ -450,17 +453,6 @@ def check(items, have, listed):
     return results
 
 
-def write_xunit(path, results):
-    suite = ET.Element("testsuite", name="packages_guard", tests=str(len(results)),
-                       failures=str(sum(1 for _, m in results if m)), errors="0")
-    for name, msg in results:
-        case = ET.SubElement(suite, "testcase", classname="packages_guard", name=name)
-        if msg:
-            ET.SubElement(case, "failure", message=msg).text = msg
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    ET.ElementTree(suite).write(path, encoding="utf-8", xml_declaration=True)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--packages", default=os.path.join(ROOT, "scripts", "packages.txt"))
@@ -489,7 +481,7 @@ def main():
     print("packages guard: %d items checked against %d listed packages (%d with dependencies and base), %d failed"
           % (len(results), len(listed), len(have), failed))
     if a.xunit:
-        write_xunit(a.xunit, results)
+        write_xunit(a.xunit, "packages_guard", results)
     return 1 if failed else 0
 
 

@@ -2,7 +2,7 @@
 // Dense stereo and induration parameters by name (see induration_config.h, config/induration.yaml).
 #include "skin3d/induration/induration_config.h"
 
-#include <yaml-cpp/yaml.h>
+#include "../common/option_table.h"
 
 #include <cmath>
 #include <functional>
@@ -15,73 +15,20 @@ namespace induration {
 
 namespace {
 
-/** @brief One key: reads its value as text and sets it from text. */
-struct Field {
-  std::function<std::string(const PipelineOptions&)> get;
-  std::function<void(PipelineOptions*, const std::string&)> set;
-};
+using Table = common::OptionTable<PipelineOptions>;
+using Field = Table::Field;
+const common::OptionText kText("induration");
 
-[[noreturn]] void bad(const std::string& key, const std::string& why) {
-  throw std::invalid_argument("induration parameter '" + key + "': " + why);
-}
-
-/** @brief Shortest text that reads back as exactly the same double. */
-std::string num(double d) {
-  for (int precision : {15, 16, 17}) {
-    std::ostringstream os;
-    os.precision(precision);
-    os << d;
-    if (precision == 17 || std::stod(os.str()) == d) return os.str();
-  }
-  return "";  // not reached
-}
-
-double toDouble(const std::string& key, const std::string& v) {
-  std::istringstream is(v);
-  double d;
-  if (!(is >> d) || !(is >> std::ws).eof()) bad(key, "'" + v + "' is not a number");
-  if (!std::isfinite(d)) bad(key, "'" + v + "' is not a finite number");
-  return d;
-}
-
-int toInt(const std::string& key, const std::string& v) {
-  const double d = toDouble(key, v);
-  if (std::floor(d) != d || std::abs(d) > 2e9) bad(key, "'" + v + "' is not a whole number");
-  return static_cast<int>(d);
-}
-
-bool toBool(const std::string& key, const std::string& v) {
-  if (v == "true" || v == "True" || v == "1") return true;
-  if (v == "false" || v == "False" || v == "0") return false;
-  bad(key, "'" + v + "' is not true/false");
-}
-
+[[noreturn]] void bad(const std::string& key, const std::string& why) { kText.bad(key, why); }
+double toDouble(const std::string& key, const std::string& v) { return kText.toDouble(key, v); }
+int toInt(const std::string& key, const std::string& v) { return kText.toInt(key, v); }
+bool toBool(const std::string& key, const std::string& v) { return kText.toBool(key, v); }
 std::string oneOf(const std::string& key, const std::string& v, const std::vector<std::string>& names) {
-  std::string known;
-  for (const auto& n : names) {
-    if (n == v) return v;
-    known += (known.empty() ? "" : ", ") + n;
-  }
-  bad(key, "'" + v + "' is not one of " + known);
+  return kText.oneOf(key, v, names);
 }
-
-/** @brief Numbers separated by spaces (commas and brackets are accepted too: "[a, b]" from a ROS parameter). */
-std::vector<double> toList(const std::string& key, const std::string& v) {
-  std::string s = v;
-  for (char& c : s)
-    if (c == ',' || c == '[' || c == ']') c = ' ';
-  std::istringstream is(s);
-  std::vector<double> out;
-  std::string item;
-  while (is >> item) out.push_back(toDouble(key, item));
-  return out;
-}
-
-std::string listText(const std::vector<double>& v) {
-  std::string s;
-  for (double d : v) s += (s.empty() ? "" : " ") + num(d);
-  return s;
-}
+std::vector<double> toList(const std::string& key, const std::string& v) { return kText.toList(key, v); }
+std::string listText(const std::vector<double>& v) { return common::OptionText::listText(v); }
+std::string num(double d) { return common::exactNum(d); }
 
 cv::Rect toRoi(const std::string& key, const std::string& v) {
   const std::vector<double> n = toList(key, v);
@@ -111,8 +58,8 @@ cv::Rect toRoi(const std::string& key, const std::string& v) {
          [](PipelineOptions* o, const std::string& v) { o->member = oneOf(key, v, __VA_ARGS__); }}}
 // clang-format on
 
-const std::vector<std::pair<std::string, Field>>& table() {
-  static const std::vector<std::pair<std::string, Field>> t = {
+const Table& table() {
+  static const Table t(kText, {
       // --- working range
       SKIN3D_DOUBLE("z_min", z_min),
       SKIN3D_DOUBLE("z_max", z_max),
@@ -167,16 +114,8 @@ const std::vector<std::pair<std::string, Field>>& table() {
           if (b.empty()) bad("pasi_boundaries", "'" + v + "' must be a list of increasing heights in m");
           o->induration.pasi_boundaries = std::move(b);
         }}},
-  };
+  });
   return t;
-}
-
-const Field& field(const std::string& key) {
-  for (const auto& f : table())
-    if (f.first == key) return f.second;
-  std::string known;
-  for (const auto& f : table()) known += (known.empty() ? "" : ", ") + f.first;
-  throw std::invalid_argument("unknown induration parameter '" + key + "' (known: " + known + ")");
 }
 
 void require(bool ok, const std::string& key, const std::string& why) {
@@ -215,59 +154,20 @@ void PipelineOptions::validate() const {
   // The string choices are checked when set; re-check here for options filled in by code.
   for (const auto& key : {"sgbm_mode", "subpixel", "reference_model"}) {
     PipelineOptions copy;
-    field(key).set(&copy, field(key).get(*this));
+    table().set(&copy, key, table().get(*this, key));
   }
   induration.validate();  // IndurationError (an std::invalid_argument) naming the option = the key
 }
 
-const std::vector<std::string>& pipelineOptionKeys() {
-  static const std::vector<std::string> keys = [] {
-    std::vector<std::string> k;
-    for (const auto& f : table()) k.push_back(f.first);
-    return k;
-  }();
-  return keys;
-}
+const std::vector<std::string>& pipelineOptionKeys() { return table().keys(); }
 
-std::string getPipelineOption(const PipelineOptions& options, const std::string& key) {
-  return field(key).get(options);
-}
+std::string getPipelineOption(const PipelineOptions& options, const std::string& key) { return table().get(options, key); }
 
 void setPipelineOption(PipelineOptions* options, const std::string& key, const std::string& value) {
-  field(key).set(options, value);
+  table().set(options, key, value);
 }
 
-void applyPipelineOptions(PipelineOptions* options, const std::string& yaml_path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const std::exception& e) {
-    throw std::invalid_argument("cannot read induration parameters from '" + yaml_path + "': " + e.what());
-  }
-  if (!root || root.IsNull()) return;
-  if (!root.IsMap()) throw std::invalid_argument("'" + yaml_path + "': expected a map of induration parameters");
-  for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    std::string text;
-    if (kv.second.IsSequence()) {  // pasi_boundaries: [a, b, c, d], roi: [x, y, w, h]
-      for (const auto& item : kv.second) {
-        if (!item.IsScalar())
-          throw std::invalid_argument("'" + yaml_path + "': induration parameter '" + key +
-                                      "' must be a list of numbers");
-        text += (text.empty() ? "" : " ") + item.Scalar();
-      }
-    } else if (kv.second.IsScalar() || kv.second.IsNull()) {
-      text = kv.second.IsNull() ? "" : kv.second.Scalar();
-    } else {
-      throw std::invalid_argument("'" + yaml_path + "': induration parameter '" + key + "' must be a value or a list");
-    }
-    try {
-      setPipelineOption(options, key, text);
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument("'" + yaml_path + "': " + e.what());
-    }
-  }
-}
+void applyPipelineOptions(PipelineOptions* options, const std::string& yaml_path) { table().applyYaml(options, yaml_path); }
 
 }  // namespace induration
 }  // namespace skin3d

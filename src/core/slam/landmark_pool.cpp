@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 #include "skin3d/slam/landmark_pool.h"
 
+#include "../common/text.h"
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstddef>
@@ -14,11 +16,7 @@ namespace slam {
 
 namespace {
 
-std::string num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+using common::num;
 
 [[noreturn]] void badOption(const std::string& field, double value, const std::string& rule) {
   throw std::invalid_argument("landmark pool options: " + field + " = " + num(value) + ": " + rule);

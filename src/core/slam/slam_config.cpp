@@ -2,7 +2,7 @@
 // SLAM parameters by name (see slam_config.h).
 #include "skin3d/slam/slam_config.h"
 
-#include <yaml-cpp/yaml.h>
+#include "../common/option_table.h"
 
 #include <functional>
 #include <map>
@@ -13,42 +13,17 @@ namespace skin3d {
 namespace slam {
 
 namespace {
-struct Field {
-  std::function<std::string(const SlamOptions&)> get;
-  std::function<void(SlamOptions*, const std::string&)> set;
-};
-
-double toDouble(const std::string& key, const std::string& v) {
-  std::istringstream is(v);
-  double d;
-  if (!(is >> d) || !(is >> std::ws).eof())
-    throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not a number");
-  return d;
-}
-int toInt(const std::string& key, const std::string& v) {
-  const double d = toDouble(key, v);
-  if (d != static_cast<int>(d)) throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not an integer");
-  return static_cast<int>(d);
-}
-bool toBool(const std::string& key, const std::string& v) {
-  if (v == "true" || v == "True" || v == "1") return true;
-  if (v == "false" || v == "False" || v == "0") return false;
-  throw std::invalid_argument("slam parameter '" + key + "': '" + v + "' is not true/false");
-}
-std::string num(double d) {
-  std::ostringstream os;
-  os.precision(17);
-  os << d;
-  return os.str();
-}
+using Table = common::OptionTable<SlamOptions>;
+using Field = Table::Field;
+const common::OptionText kText("slam");
 
 #define SKIN3D_DOUBLE(key, member) \
-  {key, {[](const SlamOptions& o) { return num(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = toDouble(key, v); }}}
+  {key, {[](const SlamOptions& o) { return common::exactNum(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = kText.toDouble(key, v); }}}
 #define SKIN3D_INT(key, member) \
-  {key, {[](const SlamOptions& o) { return num(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = toInt(key, v); }}}
+  {key, {[](const SlamOptions& o) { return std::to_string(o.member); }, [](SlamOptions* o, const std::string& v) { o->member = kText.toInt(key, v); }}}
 #define SKIN3D_BOOL(key, member)                                                    \
   {key, {[](const SlamOptions& o) { return std::string(o.member ? "true" : "false"); }, \
-         [](SlamOptions* o, const std::string& v) { o->member = toBool(key, v); }}}
+         [](SlamOptions* o, const std::string& v) { o->member = kText.toBool(key, v); }}}
 
 template <class E>
 Field enumField(const char* key, E SlamOptions::*, std::vector<std::pair<std::string, E>> names,
@@ -67,12 +42,12 @@ Field enumField(const char* key, E SlamOptions::*, std::vector<std::pair<std::st
               }
               known += (known.empty() ? "" : ", ") + n.first;
             }
-            throw std::invalid_argument(std::string("slam parameter '") + key + "': '" + v + "' is not one of " + known);
+            kText.bad(key, "'" + v + "' is not one of " + known);
           }};
 }
 
-const std::vector<std::pair<std::string, Field>>& table() {
-  static const std::vector<std::pair<std::string, Field>> t = {
+const Table& table() {
+  static const Table t(kText, {
       SKIN3D_BOOL("use_gyro", use_gyro),
       SKIN3D_DOUBLE("gyro_noise", gyro_noise),
       SKIN3D_INT("max_updates_per_frame", max_updates_per_frame),
@@ -116,54 +91,21 @@ const std::vector<std::pair<std::string, Field>>& table() {
                                             {{"longest_run", ForkPolicy::LONGEST_RUN}, {"first_seen", ForkPolicy::FIRST_SEEN}},
                                             [](SlamOptions* o) -> ForkPolicy& { return o->pool.fork; },
                                             [](const SlamOptions& o) { return o.pool.fork; })},
-  };
+  });
   return t;
 }
 
-const Field& field(const std::string& key) {
-  for (const auto& f : table())
-    if (f.first == key) return f.second;
-  std::string known;
-  for (const auto& f : table()) known += (known.empty() ? "" : ", ") + f.first;
-  throw std::invalid_argument("unknown slam parameter '" + key + "' (known: " + known + ")");
-}
 }  // namespace
 
-const std::vector<std::string>& slamOptionKeys() {
-  static const std::vector<std::string> keys = [] {
-    std::vector<std::string> k;
-    for (const auto& f : table()) k.push_back(f.first);
-    return k;
-  }();
-  return keys;
-}
+const std::vector<std::string>& slamOptionKeys() { return table().keys(); }
 
-std::string getSlamOption(const SlamOptions& options, const std::string& key) { return field(key).get(options); }
+std::string getSlamOption(const SlamOptions& options, const std::string& key) { return table().get(options, key); }
 
 void setSlamOption(SlamOptions* options, const std::string& key, const std::string& value) {
-  field(key).set(options, value);
+  table().set(options, key, value);
 }
 
-void applySlamOptions(SlamOptions* o, const std::string& yaml_path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const std::exception& e) {
-    throw std::invalid_argument("cannot read slam parameters from '" + yaml_path + "': " + e.what());
-  }
-  if (!root || root.IsNull()) return;
-  if (!root.IsMap()) throw std::invalid_argument("'" + yaml_path + "': expected a map of slam parameters");
-  for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    if (!kv.second.IsScalar())
-      throw std::invalid_argument("'" + yaml_path + "': slam parameter '" + key + "' must be a single value");
-    try {
-      setSlamOption(o, key, kv.second.as<std::string>());
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument("'" + yaml_path + "': " + e.what());
-    }
-  }
-}
+void applySlamOptions(SlamOptions* o, const std::string& yaml_path) { table().applyYaml(o, yaml_path); }
 
 SlamOptions loadSlamOptions(const std::string& yaml_path) {
   SlamOptions o;

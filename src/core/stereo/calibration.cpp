@@ -43,11 +43,7 @@ std::string exact(double v) {
   return std::string(buf, r.ptr);
 }
 
-std::string fixed(double v, int decimals) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), "%.*f", decimals, v);
-  return buf;
-}
+using common::fixed;
 
 std::string quoted(const std::string& s) {
   std::string out = "\"";

@@ -45,6 +45,8 @@
 
 #include "skin3d/stereo/features.h"
 
+#include "../common/text.h"
+
 #include <algorithm>
 #include <cctype>
 #include <cfloat>
@@ -64,11 +66,7 @@ namespace stereo {
 
 namespace {
 
-std::string num(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
+using common::num;
 
 [[noreturn]] void badOption(const std::string& field, double value, const std::string& rule) {
   throw std::invalid_argument("feature options: " + field + " = " + num(value) + ": " + rule);

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Private helper of the offline tools (process_bag's SLAM and induration modes): pairs the left and right
-// images of a bag by stamp (a bag may store either first, and the camera_info after the images) and keeps
-// the rectifiers of the first camera_info of each side.
+// skin3d_ros: the bag stereo-pair reader of the offline tools and benchmarks (process_bag's SLAM and induration
+// modes, bench_dense, bench_frontend): pairs the left and right images of a bag by stamp (a bag may store either
+// first, and the camera_info after the images) and keeps the rectifiers of the first camera_info of each side.
 #pragma once
 
 #include <rosbag/view.h>
@@ -11,12 +11,14 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "skin3d/ros/conversions.h"
 #include "skin3d/stereo/rectification.h"
 
 namespace skin3d {
-namespace tools {
+namespace ros_io {
 
 class StereoPairs {
  public:
@@ -73,5 +75,19 @@ class StereoPairs {
   std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l_, pending_r_;
 };
 
-}  // namespace tools
+/** The raw stereo pairs of a bag, read into memory (benchmarks time them without the bag's I/O). */
+struct RawStereoPairs {
+  std::vector<std::pair<cv::Mat, cv::Mat>> pairs;  //!< left, right, mono8, in stamp order
+  geometry::CameraInfo left, right;                //!< the first camera_info of each side
+};
+
+/**
+ * @brief The first `max_pairs` (<= 0: all) stereo/{left,right}/image_raw pairs with equal stamps of the bag
+ * (topics under `ns` as ros_io::BagTopics chooses them) as mono8 images, and the first camera_info of each side.
+ * @throws std::runtime_error naming the bag and the problem: unreadable, no pair, no camera_info, or a
+ * camera_info whose size differs from the images'.
+ */
+RawStereoPairs readRawStereoPairs(const std::string& bag_path, const std::string& ns, long max_pairs);
+
+}  // namespace ros_io
 }  // namespace skin3d

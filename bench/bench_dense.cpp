@@ -46,12 +46,22 @@
 
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/stereo_pairs.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/dense_stereo.h"
 #include "skin3d/stereo/rectification.h"
 
+#include "bench_common.h"
+
 namespace {
+
+using skin3d::bench::cpuModel;
+using skin3d::bench::loadAverage;
+using skin3d::bench::availableMemory;
+using skin3d::bench::today;
+using skin3d::bench::fixed;
+using skin3d::bench::median;
 
 using namespace skin3d;
 using Clock = std::chrono::steady_clock;
@@ -67,56 +77,6 @@ const char* kUsage =
     "  -h, --help        this text\n";
 
 double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
-
-std::string cpuModel() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto p = line.find(':');
-      if (p != std::string::npos) return line.substr(line.find_first_not_of(" \t", p + 1));
-    }
-  return "unknown";
-}
-
-std::string loadAverage() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  if (!(f >> a >> b >> c)) return "unknown";
-  std::ostringstream os;
-  os << std::fixed << std::setprecision(2) << a << ", " << b << ", " << c;
-  return os.str();
-}
-
-/** MemAvailable from /proc/meminfo, bytes (0 if unknown). */
-double availableMemory() {
-  std::ifstream f("/proc/meminfo");
-  std::string key;
-  double kb = 0;
-  std::string unit;
-  while (f >> key >> kb >> unit)
-    if (key == "MemAvailable:") return kb * 1024.0;
-  return 0;
-}
-
-std::string today() {
-  const std::time_t t = std::time(nullptr);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M", std::localtime(&t));
-  return buf;
-}
-
-std::string fixed(double v, int digits) {
-  std::ostringstream os;
-  os << std::fixed << std::setprecision(digits) << v;
-  return os.str();
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 /** A crop of `img` over `r`, zero outside the image. */
 cv::Mat paddedCrop(const cv::Mat& img, const cv::Rect& r) {
@@ -156,60 +116,6 @@ void plainSgbm(const cv::Mat& left, const cv::Mat& right, const cv::Rect& roi, d
   row->sgbm.push_back(ms(t1, t2));
   row->total.push_back(ms(t0, t2));
   row->valid.push_back(static_cast<double>(cv::countNonZero(d >= 0)) / d.total());
-}
-
-/** The first `frames_wanted` stereo pairs of the bag (matched by stamp, mono8) and the first camera_info of each
- *  side. @return 0, or 1 with a message on stderr. */
-int readPairs(const std::string& bag_path, const std::string& bag_ns, long frames_wanted,
-              std::vector<std::pair<cv::Mat, cv::Mat>>* out, geometry::CameraInfo* li_out, geometry::CameraInfo* ri_out) {
-  std::vector<std::pair<cv::Mat, cv::Mat>>& frames = *out;
-  geometry::CameraInfo& li = *li_out;
-  geometry::CameraInfo& ri = *ri_out;
-  bool have_li = false, have_ri = false;
-  try {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    const ros_io::BagTopics topics(bag, bag_path,
-                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                                    "stereo/right/camera_info"},
-                                   bag_ns);
-    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
-    std::map<ros::Time, std::pair<cv::Mat, cv::Mat>> pending;
-    for (const rosbag::MessageInstance& m : view) {
-      if (static_cast<long>(frames.size()) >= frames_wanted && have_li && have_ri) break;
-      const std::string topic = topics.relative(m.getTopic());
-      if (topic == "stereo/left/camera_info" && !have_li) {
-        li = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_li = true;
-      } else if (topic == "stereo/right/camera_info" && !have_ri) {
-        ri = ros_conv::fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_ri = true;
-      } else if ((topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") &&
-                 static_cast<long>(frames.size()) < frames_wanted) {
-        const auto img = m.instantiate<sensor_msgs::Image>();
-        auto& p = pending[img->header.stamp];
-        (topic == "stereo/left/image_raw" ? p.first : p.second) = ros_conv::toMono8(*img);
-        if (!p.first.empty() && !p.second.empty()) {
-          frames.push_back(p);
-          pending.erase(img->header.stamp);
-        }
-      }
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "bench_dense: cannot read " << bag_path << ": " << e.what() << "\n";
-    return 1;
-  }
-  if (frames.empty() || !have_li || !have_ri) {
-    std::cerr << "bench_dense: " << bag_path
-              << " has no stereo/{left,right}/image_raw pairs with equal stamps or no stereo/{left,right}/camera_info\n";
-    return 1;
-  }
-  const cv::Size size = frames[0].first.size();
-  if (li.width != size.width || li.height != size.height) {
-    std::cerr << "bench_dense: camera_info size " << li.width << "x" << li.height << " differs from the images' "
-              << size.width << "x" << size.height << "\n";
-    return 1;
-  }
-  return 0;
 }
 
 /** A strongly converged rig rectified with flags 0 may put the working area far from the image centre: a region
@@ -275,6 +181,21 @@ void printReport(int argc, char** argv, const std::string& bag_path, std::size_t
   for (const std::string& w : warnings) std::cout << "- warning: " << w << "\n";
 }
 
+/** The first `frames_wanted` raw stereo pairs of the bag and its camera_infos; false (with a message) if none. */
+bool readPairs(const std::string& bag_path, const std::string& bag_ns, long frames_wanted,
+               std::vector<std::pair<cv::Mat, cv::Mat>>* frames, geometry::CameraInfo* li, geometry::CameraInfo* ri) {
+  try {
+    ros_io::RawStereoPairs in = ros_io::readRawStereoPairs(bag_path, bag_ns, frames_wanted);
+    *frames = std::move(in.pairs);
+    *li = in.left;
+    *ri = in.right;
+    return true;
+  } catch (const std::exception& e) {
+    std::cerr << "bench_dense: " << e.what() << "\n";
+    return false;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -337,7 +258,7 @@ int main(int argc, char** argv) {
   // Read the pairs (matched by stamp) and the first camera_info of each side.
   std::vector<std::pair<cv::Mat, cv::Mat>> frames;
   geometry::CameraInfo li, ri;
-  if (const int code = readPairs(bag_path, bag_ns, frames_wanted, &frames, &li, &ri)) return code;
+  if (!readPairs(bag_path, bag_ns, frames_wanted, &frames, &li, &ri)) return 1;
   const cv::Size size = frames[0].first.size();
 
   std::pair<double, double> range;

@@ -61,7 +61,13 @@
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/slam/eskf.h"
 
+#include "bench_common.h"
+
 namespace {
+
+using skin3d::bench::cpuModel;
+using skin3d::bench::loadAverage;
+using skin3d::bench::today;
 
 using skin3d::slam::Eskf;
 using skin3d::slam::EskfOptions;
@@ -312,33 +318,6 @@ class Collecting : public Base {
     Base::ReportRuns(runs);
   }
 };
-
-std::string cpuModel() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto p = line.find(':');
-      if (p != std::string::npos) return line.substr(line.find_first_not_of(" \t", p + 1));
-    }
-  return "unknown CPU";
-}
-
-std::string loadAverage() {
-  std::ifstream in("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  if (!(in >> a >> b >> c)) return "n/a";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
-  return buf;
-}
-
-std::string today() {
-  const std::time_t t = std::time(nullptr);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M", std::localtime(&t));
-  return buf;
-}
 
 // About 3 significant digits, never an exponent.
 std::string num(double x) {

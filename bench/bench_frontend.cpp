@@ -42,12 +42,19 @@
 
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/stereo_pairs.h"
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/features.h"
 #include "skin3d/stereo/rectification.h"
 #include "skin3d/stereo/stereo_landmarks.h"
 
+#include "bench_common.h"
+
 namespace {
+
+using skin3d::bench::cpuModel;
+using skin3d::bench::today;
+using skin3d::bench::fixed;
 
 using namespace skin3d;
 using Clock = std::chrono::steady_clock;
@@ -68,35 +75,6 @@ double ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-using skin3d::ros_conv::fromMsg;
-
-/** mono8 (or bgr8 / rgb8, converted to grey) image message to cv::Mat; throws on other encodings. */
-cv::Mat fromMsg(const sensor_msgs::Image& m) {
-  int type = 0, code = -1;
-  if (m.encoding == "mono8") {
-    type = CV_8UC1;
-  } else if (m.encoding == "bgr8") {
-    type = CV_8UC3;
-    code = cv::COLOR_BGR2GRAY;
-  } else if (m.encoding == "rgb8") {
-    type = CV_8UC3;
-    code = cv::COLOR_RGB2GRAY;
-  } else {
-    throw std::runtime_error("image encoding '" + m.encoding + "' not supported (mono8, bgr8, rgb8)");
-  }
-  const size_t row = static_cast<size_t>(m.width) * CV_ELEM_SIZE(type);
-  if (m.step < row || m.data.size() < static_cast<size_t>(m.step) * m.height)
-    throw std::runtime_error("image message with inconsistent step / data size");
-  const cv::Mat view(static_cast<int>(m.height), static_cast<int>(m.width), type, const_cast<uint8_t*>(m.data.data()),
-                     m.step);
-  cv::Mat out;
-  if (code < 0)
-    out = view.clone();
-  else
-    cv::cvtColor(view, out, code);
-  return out;
-}
-
 struct Summary {
   double mean = 0, median = 0, min = 0, max = 0;
 };
@@ -112,24 +90,6 @@ Summary summarise(std::vector<double> v) {
   s.min = v.front();
   s.max = v.back();
   return s;
-}
-
-std::string cpuModel() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto p = line.find(':');
-      if (p != std::string::npos) return line.substr(line.find_first_not_of(" \t", p + 1));
-    }
-  return "unknown";
-}
-
-std::string today() {
-  const std::time_t t = std::time(nullptr);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M", std::localtime(&t));
-  return buf;
 }
 
 struct Result {
@@ -193,12 +153,6 @@ Result run(stereo::FeatureType type, const std::vector<RawPair>& frames, const g
   return r;
 }
 
-std::string fixed(double v, int digits) {
-  std::ostringstream os;
-  os << std::fixed << std::setprecision(digits) << v;
-  return os.str();
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -255,47 +209,13 @@ int main(int argc, char** argv) {
   // Read the pairs (matched by header stamp) and the first camera_info of each side into memory.
   std::vector<RawPair> frames;
   geometry::CameraInfo left_info, right_info;
-  bool have_left_info = false, have_right_info = false;
   try {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    const ros_io::BagTopics topics(bag, bag_path,
-                                   {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                                    "stereo/right/camera_info"},
-                                   bag_ns);
-    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
-    std::map<ros::Time, RawPair> pending;
-    for (const rosbag::MessageInstance& m : view) {
-      if (frames_wanted > 0 && static_cast<long>(frames.size()) >= frames_wanted) break;
-      const std::string topic = topics.relative(m.getTopic());
-      if (topic == "stereo/left/camera_info" && !have_left_info) {
-        left_info = fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_left_info = true;
-      } else if (topic == "stereo/right/camera_info" && !have_right_info) {
-        right_info = fromMsg(*m.instantiate<sensor_msgs::CameraInfo>());
-        have_right_info = true;
-      } else if (topic == "stereo/left/image_raw" || topic == "stereo/right/image_raw") {
-        const auto img = m.instantiate<sensor_msgs::Image>();
-        RawPair& p = pending[img->header.stamp];
-        (topic == "stereo/left/image_raw" ? p.left : p.right) = fromMsg(*img);
-        if (!p.left.empty() && !p.right.empty()) {
-          frames.push_back(p);
-          pending.erase(img->header.stamp);
-        }
-      }
-    }
+    ros_io::RawStereoPairs in = ros_io::readRawStereoPairs(bag_path, bag_ns, frames_wanted);
+    for (auto& p : in.pairs) frames.push_back({std::move(p.first), std::move(p.second)});
+    left_info = in.left;
+    right_info = in.right;
   } catch (const std::exception& e) {
-    std::cerr << "bench_frontend: cannot read " << bag_path << ": " << e.what() << "\n";
-    return 1;
-  }
-  if (frames.empty() || !have_left_info || !have_right_info) {
-    std::cerr
-        << "bench_frontend: " << bag_path
-        << " has no stereo/{left,right}/image_raw pairs with equal stamps or no stereo/{left,right}/camera_info\n";
-    return 1;
-  }
-  if (left_info.width != frames[0].left.cols || left_info.height != frames[0].left.rows) {
-    std::cerr << "bench_frontend: camera_info size " << left_info.width << "x" << left_info.height
-              << " differs from the images' " << frames[0].left.cols << "x" << frames[0].left.rows << "\n";
+    std::cerr << "bench_frontend: " << e.what() << "\n";
     return 1;
   }
 

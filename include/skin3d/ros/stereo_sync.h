@@ -1,0 +1,52 @@
+// SPDX-License-Identifier: BSD-3-Clause
+/**
+ * @file stereo_sync.h
+ * @brief skin3d_ros: the four stereo topics (left image, left camera_info, right image, right camera_info)
+ * synchronised, exactly or approximately, for the nodelets that take a stereo pair.
+ */
+#pragma once
+
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <ros/node_handle.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace skin3d {
+namespace ros_conv {
+
+class StereoSync {
+ public:
+  using Callback = std::function<void(const sensor_msgs::Image::ConstPtr&, const sensor_msgs::CameraInfo::ConstPtr&,
+                                      const sensor_msgs::Image::ConstPtr&, const sensor_msgs::CameraInfo::ConstPtr&)>;
+  /**
+   * @brief Subscribes stereo/left/`image`, stereo/left/camera_info, stereo/right/`image` and
+   * stereo/right/camera_info of `nh`, synchronised as the private parameters ~approximate_sync (false: equal
+   * stamps) and ~queue_size (5) of `pnh` say, and calls `callback` with each set.
+   * @return empty, or the problem with a parameter to log (a ~queue_size below 1 is replaced by 5).
+   */
+  std::string subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& image, Callback callback);
+
+ private:
+  // message_filters binds a member function to the four messages (a std::function would be bound to nine)
+  void onPair(const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
+              const sensor_msgs::Image::ConstPtr& ri, const sensor_msgs::CameraInfo::ConstPtr& rc);
+  using Exact = message_filters::sync_policies::ExactTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
+                                                          sensor_msgs::Image, sensor_msgs::CameraInfo>;
+  using Approx = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
+                                                                 sensor_msgs::Image, sensor_msgs::CameraInfo>;
+  message_filters::Subscriber<sensor_msgs::Image> li_, ri_;
+  message_filters::Subscriber<sensor_msgs::CameraInfo> lc_, rc_;
+  std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
+  std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;
+  Callback callback_;
+};
+
+}  // namespace ros_conv
+}  // namespace skin3d

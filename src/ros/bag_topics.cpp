@@ -83,6 +83,14 @@ TopicResolution resolveTopics(const std::vector<std::string>& stored, const std:
   return r;
 }
 
+void openForReading(rosbag::Bag* bag, const std::string& path) {
+  try {
+    bag->open(path, rosbag::bagmode::Read);
+  } catch (const std::exception& e) {
+    throw std::invalid_argument("cannot open bag '" + path + "': " + e.what());
+  }
+}
+
 std::vector<BagTopic> listTopics(const rosbag::Bag& bag) {
   rosbag::View view(bag);
   std::map<std::string, BagTopic> by_name;

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 namespace skin3d {
 namespace ros_conv {
@@ -36,6 +37,21 @@ geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m) {
   for (int i = 0; i < 9; ++i) c.R(i / 3, i % 3) = m.R[i];
   for (int i = 0; i < 12; ++i) c.P(i / 4, i % 4) = m.P[i];
   return c;
+}
+
+sensor_msgs::CameraInfo toMsg(const geometry::CameraInfo& c, const std::string& frame, const ros::Time& t) {
+  sensor_msgs::CameraInfo m;
+  m.header.frame_id = frame;
+  m.header.stamp = t;
+  m.width = c.width;
+  m.height = c.height;
+  m.distortion_model = "plumb_bob";
+  m.D = c.D;
+  m.D.resize(5, 0.0);
+  for (int i = 0; i < 9; ++i) m.K[i] = c.K(i / 3, i % 3);
+  for (int i = 0; i < 9; ++i) m.R[i] = c.R(i / 3, i % 3);
+  for (int i = 0; i < 12; ++i) m.P[i] = c.P(i / 4, i % 4);
+  return m;
 }
 
 std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a) {
@@ -102,6 +118,21 @@ cv::Mat toMono8(const sensor_msgs::Image& img) {
     return m8;
   }
   return cv_bridge::toCvCopy(img, enc::MONO8)->image;
+}
+
+sensor_msgs::Image toMono8Msg(const cv::Mat& img, const std::string& frame, const ros::Time& t) {
+  if (img.type() != CV_8UC1) throw std::invalid_argument("toMono8Msg: the image is not 8-bit single-channel");
+  sensor_msgs::Image m;
+  m.header.frame_id = frame;
+  m.header.stamp = t;
+  m.height = img.rows;
+  m.width = img.cols;
+  m.encoding = "mono8";
+  m.is_bigendian = 0;
+  m.step = img.cols;
+  m.data.resize(static_cast<size_t>(img.rows) * img.cols);
+  for (int r = 0; r < img.rows; ++r) std::memcpy(&m.data[static_cast<size_t>(r) * img.cols], img.ptr(r), img.cols);
+  return m;
 }
 
 bool xmlRpcToText(XmlRpc::XmlRpcValue& v, std::string* text) {

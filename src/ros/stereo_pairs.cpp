@@ -15,7 +15,8 @@ RawStereoPairs readRawStereoPairs(const std::string& bag_path, const std::string
   RawStereoPairs out;
   StereoPairs in;
   try {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+    rosbag::Bag bag;
+    openForReading(&bag, bag_path);
     const BagTopics topics(bag, bag_path,
                            {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
                             "stereo/right/camera_info"},

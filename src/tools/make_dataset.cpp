@@ -19,7 +19,6 @@
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
-#include <cstring>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -31,6 +30,7 @@
 
 #include "skin3d/ros/conversions.h"
 #include "skin3d/common/large_buffers.h"
+#include "skin3d/common/run_info.h"
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
 #include "skin3d/sim/globe.h"
@@ -50,7 +50,7 @@ const char* kUsage =
     "  --ideal         no realism (blur, vignetting, photometry, noise) and an exact calibration\n"
     "  --frames N      only the first N frames (quick tests)\n"
     "  --start SECONDS stamp of the first frame (default 1000; e.g. 1700000000 for epoch stamps as a recording has)\n"
-    "  --quiet         no progress output\n";
+    "  --quiet         no progress output (progress goes to stderr)\n";
 
 const std::string kLeftFrame = "stereo_left_optical_frame";
 const std::string kRightFrame = "stereo_right_optical_frame";
@@ -63,54 +63,6 @@ struct Options {
   bool ideal = false, quiet = false;
   int frames = -1;
 };
-
-class Progress {
- public:
-  Progress(const std::string& what, int total, bool quiet) : what_(what), total_(total), quiet_(quiet) {}
-  void tick(int done) {
-    if (quiet_ || total_ <= 0) return;
-    const int pct = 100 * done / total_;
-    if (pct / 10 != last_ / 10 || done == total_) {
-      std::cout << "  " << what_ << ": " << done << "/" << total_ << " (" << pct << " %)" << std::endl;
-      last_ = pct;
-    }
-  }
-
- private:
-  std::string what_;
-  int total_;
-  bool quiet_;
-  int last_ = -10;
-};
-
-sensor_msgs::CameraInfo toMsg(const geometry::CameraInfo& c, const std::string& frame, const ros::Time& t) {
-  sensor_msgs::CameraInfo m;
-  m.header.frame_id = frame;
-  m.header.stamp = t;
-  m.width = c.width;
-  m.height = c.height;
-  m.distortion_model = "plumb_bob";
-  m.D = c.D;
-  m.D.resize(5, 0.0);
-  for (int i = 0; i < 9; ++i) m.K[i] = c.K(i / 3, i % 3);
-  for (int i = 0; i < 9; ++i) m.R[i] = c.R(i / 3, i % 3);
-  for (int i = 0; i < 12; ++i) m.P[i] = c.P(i / 4, i % 4);
-  return m;
-}
-
-sensor_msgs::Image toMsg(const cv::Mat& img, const std::string& frame, const ros::Time& t) {
-  sensor_msgs::Image m;
-  m.header.frame_id = frame;
-  m.header.stamp = t;
-  m.height = img.rows;
-  m.width = img.cols;
-  m.encoding = "mono8";
-  m.is_bigendian = 0;
-  m.step = img.cols;
-  m.data.resize(static_cast<size_t>(img.rows) * img.cols);
-  for (int r = 0; r < img.rows; ++r) std::memcpy(&m.data[static_cast<size_t>(r) * img.cols], img.ptr(r), img.cols);
-  return m;
-}
 
 geometry_msgs::PoseStamped poseMsg(const Eigen::Isometry3d& T, const ros::Time& t) {
   geometry_msgs::PoseStamped m;
@@ -253,15 +205,15 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
                 << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s" << std::endl;
   }
   const Eigen::Isometry3d T_L_R = poseLeftRight(true_rig);
-  Progress progress(images ? "rendering frames" : "measuring frames", frames, quiet);
+  common::Progress progress(frames, quiet, images ? "frames rendered" : "frames measured");
   size_t total_landmarks = 0;
   int min_lm = 1 << 30, max_lm = 0;
   for (int k = 0; k < frames; ++k) {
     const double t = s.stamp(k);
     const ros::Time stamp = g_start + ros::Duration(t);
     const Eigen::Isometry3d T_W_L = s.poseWorldLeft(t);
-    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
-    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
+    bag.write("stereo/left/camera_info", stamp, ros_conv::toMsg(info.left, kLeftFrame, stamp));
+    bag.write("stereo/right/camera_info", stamp, ros_conv::toMsg(info.right, kRightFrame, stamp));
     if (images) {
       sim::RenderOptions ro;
       ro.supersample = c.images.supersample;
@@ -271,9 +223,9 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
       const cv::Mat left = sim::renderIrradiance(*scene, true_rig.left(), T_W_L, ro);
       const cv::Mat right = sim::renderIrradiance(*scene, true_rig.right(), T_W_L * T_L_R, ro);
       const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
-      bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+      bag.write("stereo/left/image_raw", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
       bag.write("stereo/right/image_raw", stamp,
-                toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
+                ros_conv::toMono8Msg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
     } else {
       skin3d::LandmarkArray msg;
       msg.header.frame_id = kLeftFrame;
@@ -289,6 +241,7 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
     bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
     progress.tick(k + 1);
   }
+  progress.done();
   writeImu(bag, s, frames / gc.fps);
   if (!images && !quiet)
     std::cout << "  landmarks per frame: min " << min_lm << ", mean " << total_landmarks / std::max(1, frames)
@@ -356,18 +309,19 @@ void writeRenderedExposures(const sim::Scene& scene, const sim::DatasetConfig& c
     std::cout << "  rendered " << rc.width << "x" << rc.height << " pair (" << ro.supersample << "x" << ro.supersample
               << " samples) in " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()
               << " s" << std::endl;
-  Progress progress("exposures", frames, quiet);
+  common::Progress progress(frames, quiet, "exposures rendered");
   for (int k = 0; k < frames; ++k) {
     const ros::Time stamp = g_start + ros::Duration(k / fps);
     const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
-    bag.write("stereo/left/camera_info", stamp, toMsg(info.left, kLeftFrame, stamp));
-    bag.write("stereo/right/camera_info", stamp, toMsg(info.right, kRightFrame, stamp));
-    bag.write("stereo/left/image_raw", stamp, toMsg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+    bag.write("stereo/left/camera_info", stamp, ros_conv::toMsg(info.left, kLeftFrame, stamp));
+    bag.write("stereo/right/camera_info", stamp, ros_conv::toMsg(info.right, kRightFrame, stamp));
+    bag.write("stereo/left/image_raw", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
     bag.write("stereo/right/image_raw", stamp,
-              toMsg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
+              ros_conv::toMono8Msg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
     bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
     progress.tick(k + 1);
   }
+  progress.done();
 }
 
 

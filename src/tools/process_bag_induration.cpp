@@ -40,11 +40,7 @@ int runInduration(const IndurationRun& a) {
   opt.validate();
 
   rosbag::Bag bag;
-  try {
-    bag.open(a.bag, rosbag::bagmode::Read);
-  } catch (const std::exception& e) {
-    throw std::invalid_argument("cannot open bag '" + a.bag + "': " + e.what());
-  }
+  ros_io::openForReading(&bag, a.bag);
   const ros_io::BagTopics topics(bag, a.bag,
                                  {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
                                   "stereo/right/camera_info"},

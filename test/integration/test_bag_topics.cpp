@@ -105,3 +105,18 @@ TEST(BagTopics, NothingMatchingListsTheTopics) {
   EXPECT_EQ(found.nsLabel(), "/rig1");
   EXPECT_EQ(found.relative("/rig1/stereo/left/image_raw"), "stereo/left/image_raw");
 }
+
+TEST(OpenForReading, NamesTheBagItCannotOpen) {
+  rosbag::Bag bag;
+  const std::string missing = ::testing::TempDir() + "skin3d_no_such.bag";
+  try {
+    skin3d::ros_io::openForReading(&bag, missing);
+    FAIL() << "expected an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot open bag '" + missing + "'"), std::string::npos) << e.what();
+  }
+  const std::string path = writeBag("skin3d_open.bag", {"/stereo/left/image_raw"});
+  rosbag::Bag good;
+  skin3d::ros_io::openForReading(&good, path);
+  EXPECT_EQ(BagTopics(good, path, kWanted).count("stereo/left/image_raw"), 3u);
+}

@@ -14,6 +14,7 @@
 #include <fstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace skin3d {
@@ -21,12 +22,14 @@ namespace common {
 
 /**
  * @brief Progress of a long offline run on stderr: "k / N frames (p %), elapsed, remaining" at most every
- * 2 s on a terminal (one line, overwritten), every 10 % of the frames otherwise (logs stay short).
+ * 2 s on a terminal (one line, overwritten), every 10 % of the frames otherwise (logs stay short). The
+ * word "frames" is the unit's name, which the caller may change (e.g. "frames rendered").
  */
 class Progress {
  public:
-  /** @param total frames expected (<= 0: unknown), @param quiet print nothing */
-  Progress(int total, bool quiet) : total_(total), quiet_(quiet), tty_(::isatty(2) != 0), t0_(clock::now()) {}
+  /** @param total frames expected (<= 0: unknown), @param quiet print nothing, @param unit what is counted */
+  Progress(int total, bool quiet, std::string unit = "frames")
+      : total_(total), quiet_(quiet), tty_(::isatty(2) != 0), t0_(clock::now()), unit_(std::move(unit)) {}
   /** @brief Frame k (1-based) is done; `detail` is appended to the line. */
   void tick(int k, const std::string& detail = "") {
     if (quiet_) return;
@@ -43,10 +46,10 @@ class Progress {
     char head[160];
     if (total_ > 0) {
       const double remaining = k > 0 ? el * (total_ - k) / k : 0.0;
-      std::snprintf(head, sizeof head, "  %d / %d frames (%3.0f %%), %.0f s elapsed, ~%.0f s to go", k, total_,
-                    100.0 * k / total_, el, remaining);
+      std::snprintf(head, sizeof head, "  %d / %d %s (%3.0f %%), %.0f s elapsed, ~%.0f s to go", k, total_,
+                    unit_.c_str(), 100.0 * k / total_, el, remaining);
     } else {
-      std::snprintf(head, sizeof head, "  %d frames, %.0f s elapsed", k, el);
+      std::snprintf(head, sizeof head, "  %d %s, %.0f s elapsed", k, unit_.c_str(), el);
     }
     std::fprintf(stderr, "%s%s%s%s", tty_ ? "\r" : "", head, detail.empty() ? "" : "; ", detail.c_str());
     std::fprintf(stderr, tty_ && !last ? "\033[K" : "\n");
@@ -62,6 +65,7 @@ class Progress {
   int total_;
   bool quiet_, tty_;
   clock::time_point t0_;
+  std::string unit_;
   double last_ = 0.0;
   int last_decile_ = -1;
 };

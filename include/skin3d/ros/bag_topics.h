@@ -53,6 +53,12 @@ std::string normaliseNamespace(const std::string& ns);
 TopicResolution resolveTopics(const std::vector<std::string>& stored, const std::vector<std::string>& wanted,
                               const std::string& ns);
 
+/**
+ * @brief Opens a bag for reading; throws std::invalid_argument "cannot open bag 'PATH': why" when it cannot
+ * (missing, unreadable, not a bag, unindexed).
+ */
+void openForReading(rosbag::Bag* bag, const std::string& path);
+
 /** @brief Every topic of an open bag (name, type, message count), sorted by name. */
 std::vector<BagTopic> listTopics(const rosbag::Bag& bag);
 

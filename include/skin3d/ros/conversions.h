@@ -35,7 +35,11 @@ namespace ros_conv {
 /** @brief A position and a rotation as a geometry_msgs/Pose. */
 geometry_msgs::Pose toPoseMsg(const Eigen::Vector3d& p, const Eigen::Quaterniond& q);
 
+/** @brief A camera_info message as the core's CameraInfo (the inverse of toMsg). */
 geometry::CameraInfo fromMsg(const sensor_msgs::CameraInfo& m);
+
+/** @brief The core's CameraInfo as a plumb_bob camera_info message (D padded to 5) in `frame`, stamped `t`. */
+sensor_msgs::CameraInfo toMsg(const geometry::CameraInfo& c, const std::string& frame, const ros::Time& t);
 
 /** @brief The SLAM's measurements of one LandmarkArray (no checks: the SLAM drops bad ones and counts them). */
 std::vector<slam::Measurement> fromMsg(const skin3d::LandmarkArray& a);
@@ -53,6 +57,9 @@ std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraI
 
 /** @brief 8-bit grayscale view of a checked image (throws cv_bridge::Exception on conversion failure). */
 cv::Mat toMono8(const sensor_msgs::Image& img);
+
+/** @brief An 8-bit single-channel image as a mono8 message (copied row by row) in `frame`, stamped `t`. */
+sensor_msgs::Image toMono8Msg(const cv::Mat& mono8, const std::string& frame, const ros::Time& t);
 
 // ------------------------------------------------------------------ dense stereo and induration
 

@@ -269,6 +269,18 @@ double counter(const benchmark::BenchmarkReporter::Run& r, const char* name) {
   return it == r.counters.end() ? 0.0 : static_cast<double>(it->second);
 }
 
+// One run's figures (the single run, or the median of the repetitions) into its result.
+void take(const benchmark::BenchmarkReporter::Run& r, double ms, double cpu_ms, Result* res) {
+  res->ms = ms;
+  res->cpu_ms = cpu_ms;
+  res->pred_ms = counter(r, "pred_ms");
+  res->upd_ms = counter(r, "upd_ms");
+  res->nis_dof = counter(r, "nis/dof");
+  res->iterations = static_cast<long>(counter(r, "frames"));
+  res->reps = static_cast<int>(r.repetitions);
+  res->have = true;
+}
+
 void collect(const std::vector<benchmark::BenchmarkReporter::Run>& runs) {
   for (const auto& r : runs) {
     Result& res = g_results[r.run_name.function_name];
@@ -281,27 +293,13 @@ void collect(const std::vector<benchmark::BenchmarkReporter::Run>& runs) {
     const double cpu_ms = r.iterations > 0 ? 1e3 * r.cpu_accumulated_time / static_cast<double>(r.iterations) : 0;
     if (r.run_type == benchmark::BenchmarkReporter::Run::RT_Iteration) {
       if (!res.have || r.repetitions <= 1) {  // the single run when there are no aggregates
-        res.ms = ms;
-        res.cpu_ms = cpu_ms;
         res.min_ms = res.have ? std::min(res.min_ms, ms) : ms;
-        res.pred_ms = counter(r, "pred_ms");
-        res.upd_ms = counter(r, "upd_ms");
-        res.nis_dof = counter(r, "nis/dof");
-        res.iterations = static_cast<long>(counter(r, "frames"));
-        res.reps = static_cast<int>(r.repetitions);
-        res.have = true;
+        take(r, ms, cpu_ms, &res);
       } else {
         res.min_ms = std::min(res.min_ms, ms);
       }
     } else if (r.aggregate_name == "median") {
-      res.ms = ms;
-      res.cpu_ms = cpu_ms;
-      res.pred_ms = counter(r, "pred_ms");
-      res.upd_ms = counter(r, "upd_ms");
-      res.nis_dof = counter(r, "nis/dof");
-      res.iterations = static_cast<long>(counter(r, "frames"));
-      res.reps = static_cast<int>(r.repetitions);
-      res.have = true;
+      take(r, ms, cpu_ms, &res);
     } else if (r.aggregate_name == "min") {
       res.min_ms = ms;
     }

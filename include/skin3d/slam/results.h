@@ -38,6 +38,7 @@ struct StateRow {
   double t = 0.0;
   FrameStats stats;
   Eigen::Vector3d v = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();  //!< estimated gyroscope bias, rad/s (0 when not estimated)
   double trace_rig = 0.0, trace_landmarks = 0.0, trace_all = 0.0;
   double pose_position_std = 0.0;  //!< sqrt(trace of the position covariance), m
   double corr_vx_wy = 0.0;

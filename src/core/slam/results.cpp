@@ -43,6 +43,7 @@ StateRow stateRow(const SlamSystem& slam, const FrameStats& stats) {
   const Eskf& f = slam.filter();
   r.v = f.state().v;
   r.w = f.state().w;
+  if (f.rigDim() == 15) r.gyro_bias = f.state().gyro_bias;
   r.trace_rig = f.rigTrace();
   r.trace_landmarks = f.landmarksTrace();
   r.trace_all = f.totalTrace();
@@ -245,14 +246,15 @@ void writePly(const std::string& path, const std::vector<MapPoint>& map) {
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows) {
   auto f = open(path);
   f << "t,vx,vy,vz,wx,wy,wz,trace_rig,trace_landmarks,trace_all,position_std_m,corr_vx_wy,pool_size,pool_in_use,"
-       "ever_seen,measurements,rejected,associated,used,initialised,forks_deleted,pruned,gyro_used,nis,nis_dof\n";
+       "ever_seen,measurements,rejected,associated,used,initialised,forks_deleted,pruned,gyro_used,nis,nis_dof,bgx,bgy,bgz\n";
   for (const auto& r : rows)
     f << stampText(r.t) << ',' << r.v.x() << ',' << r.v.y() << ',' << r.v.z() << ',' << r.w.x() << ',' << r.w.y() << ','
       << r.w.z() << ',' << r.trace_rig << ',' << r.trace_landmarks << ',' << r.trace_all << ','
       << r.pose_position_std << ',' << r.corr_vx_wy << ',' << r.pool_size << ',' << r.pool_in_use << ','
       << r.ever_seen << ',' << r.stats.measurements << ',' << r.stats.rejected_invalid << ',' << r.stats.associated
       << ',' << r.stats.used << ',' << r.stats.initialised << ',' << r.stats.forks_deleted << ',' << r.stats.pruned
-      << ',' << r.stats.gyro_used << ',' << r.stats.nis << ',' << r.stats.nis_dof << '\n';
+      << ',' << r.stats.gyro_used << ',' << r.stats.nis << ',' << r.stats.nis_dof << ',' << r.gyro_bias.x() << ','
+      << r.gyro_bias.y() << ',' << r.gyro_bias.z() << '\n';
   close(f, path);
 }
 
@@ -319,6 +321,14 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
       << r.trace_rig << YAML::Key << "landmarks_m2" << YAML::Value << r.trace_landmarks << YAML::Key << "all"
       << YAML::Value << r.trace_all << YAML::EndMap;
     y << YAML::Key << "corr_vx_wy_final" << YAML::Value << r.corr_vx_wy;
+    if (r.rig_covariance.rows() == 15) {  // the gyro bias was estimated: its final value and std, rad/s
+      y << YAML::Key << "final_gyro_bias" << YAML::Value << YAML::BeginMap << YAML::Key << "rad_s" << YAML::Value
+        << YAML::Flow << YAML::BeginSeq;
+      for (int i = 0; i < 3; ++i) y << r.gyro_bias[i];
+      y << YAML::EndSeq << YAML::Key << "std_rad_s" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+      for (int i = 0; i < 3; ++i) y << std::sqrt(std::max(0.0, static_cast<double>(r.rig_covariance(12 + i, 12 + i))));
+      y << YAML::EndSeq << YAML::EndMap;
+    }
   }
   if (!run.ground_truth.empty()) {
     auto ate = [&](const char* key, AteAlignment a, const char* what) {

@@ -490,6 +490,66 @@ TEST(EskfFastVsDense, ThreadedSizes) {
   runFastVsDense(25, false, 130, true, 25);
 }
 
+// ============================================================================ gyro interval
+
+namespace {
+
+// k gyro samples between two frames: propagateWithGyro() against the same steps one by one on the fast
+// filter (predict + updateGyro) and on the dense reference (predictDense + updateGyroDense).
+void runGyroInterval(unsigned seed, bool bias, int slots, int samples, const Eigen::Vector3d& walk) {
+  EskfOptions opt = testOptions(bias);
+  opt.landmark_walk = walk;
+  std::mt19937 rng(seed);
+  const Eskf start = makeFilter(rng, bias, slots, slots - 3, opt);  // 3 free slots stay free
+  Eskf batch = start, seq = start, dense = start;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<Eskf::GyroStep> steps;
+  for (int i = 0; i < samples; ++i) {
+    Eskf::GyroStep st;
+    st.dt = (i == 0) ? 0.0 : 0.005 + 0.01 * u(rng);  // the first sample at the filter's own time
+    st.C = randomSpd(rng, 3, 1e-6, 1e-4);
+    st.z = start.state().w + start.state().gyro_bias + uniform3(rng, 0.05);
+    steps.push_back(st);
+  }
+  const Eskf::UpdateResult rb = batch.propagateWithGyro(steps);
+  double nis_seq = 0.0, nis_dense = 0.0;
+  for (const Eskf::GyroStep& st : steps) {
+    if (st.dt > 0.0) {
+      seq.predict(st.dt);
+      dense.predictDense(st.dt);
+    }
+    nis_seq += seq.updateGyro(st.z, st.C).nis;
+    nis_dense += dense.updateGyroDense(st.z, st.C).nis;
+  }
+  const std::string where = "seed " + std::to_string(seed) + ", " + std::to_string(samples) + " samples";
+  EXPECT_EQ(rb.used, samples) << where;
+  EXPECT_EQ(rb.dof, 3 * samples) << where;
+  EXPECT_NEAR(rb.nis, nis_seq, 1e-8 * (1.0 + nis_seq)) << where;
+  EXPECT_NEAR(rb.nis, nis_dense, 1e-8 * (1.0 + nis_dense)) << where;
+  expectSameFilter(batch, seq, 1e-9, where + " (batch vs one by one)");
+  expectSameFilter(batch, dense, 1e-9, where + " (batch vs dense)");
+  // The landmarks moved (the rig-landmark correlations carry the gyro's information) and free slots stayed zero.
+  double moved = 0.0;
+  for (int j = 0; j < slots - 3; ++j) moved = std::max(moved, (batch.landmark(j) - start.landmark(j)).norm());
+  if (samples > 0) {
+    EXPECT_GT(moved, 1e-9) << where;
+  }
+  const int n = batch.dim(), free0 = batch.slotIndex(slots - 3);
+  EXPECT_EQ(batch.covariance().block(free0, 0, n - free0, n).cwiseAbs().maxCoeff(), 0.0) << where;
+  EXPECT_EQ(batch.covariance(), Mat(batch.covariance().transpose())) << where;
+}
+
+}  // namespace
+
+TEST(EskfGyroInterval, SameAsTheStepsOneByOneAndAsTheDenseForm) {
+  runGyroInterval(31, false, 12, 10, Eigen::Vector3d::Zero());
+  runGyroInterval(32, true, 12, 10, Eigen::Vector3d::Zero());
+  runGyroInterval(33, true, 12, 1, Eigen::Vector3d::Zero());
+  runGyroInterval(34, true, 12, 25, Eigen::Vector3d(1e-3, 1e-3, 3e-3));  // landmark walk on
+  runGyroInterval(35, true, 140, 10, Eigen::Vector3d::Zero());           // n >= 384: two threads
+  runGyroInterval(36, false, 12, 0, Eigen::Vector3d::Zero());            // no sample: nothing changes
+}
+
 // ============================================================================ symmetric positive definite
 
 TEST(EskfCovariance, StaysSymmetricPositiveDefiniteOverALongRandomRun) {
@@ -875,6 +935,15 @@ TEST(EskfBadInputs, ThrowWithAClearMessageAndLeaveTheFilterUnchanged) {
                         "innovationKnown asymmetric");
   expectThrowsUnchanged(f, [&] { f.updateGyro(Eigen::Vector3d(inf, 0, 0), good); }, "not finite", "gyro z inf");
   expectThrowsUnchanged(f, [&] { f.updateGyro(Eigen::Vector3d::Zero(), indef); }, "positive definite", "gyro C");
+  {
+    std::vector<Eskf::GyroStep> steps(3);
+    steps[1].dt = 0.01;
+    steps[2].dt = -0.01;
+    expectThrowsUnchanged(f, [&] { f.propagateWithGyro(steps); }, "step 2: dt", "gyro interval dt");
+    steps[2].dt = 0.01;
+    steps[1].C = indef;
+    expectThrowsUnchanged(f, [&] { f.propagateWithGyro(steps); }, "positive definite", "gyro interval C");
+  }
 
   expectThrowsUnchanged(f, [&] { f.addLandmark(1, z, good); }, "already active", "add to active slot");
   expectThrowsUnchanged(f, [&] { f.addLandmark(6, z, good); }, "out of range", "add out of range");

@@ -5,6 +5,7 @@
 #include "../common/text.h"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -381,12 +382,14 @@ double Eskf::totalTrace() const { return C_.trace(); }
 
 // ============================================================================ Jacobians
 
-Eigen::MatrixXd Eskf::transitionJacobian(double dt) const {
-  const Eigen::Matrix3d R = geometry::toRotationMatrix(x_.q);
+Eigen::MatrixXd Eskf::transitionJacobian(double dt) const { return transitionJacobianAt(x_, dt); }
+
+Eigen::MatrixXd Eskf::transitionJacobianAt(const RigState& x, double dt) const {
+  const Eigen::Matrix3d R = geometry::toRotationMatrix(x.q);
   Eigen::MatrixXd F = Eigen::MatrixXd::Identity(rd_, rd_);
-  F.block<3, 3>(0, 3) = -skew(R * x_.v * dt);
+  F.block<3, 3>(0, 3) = -skew(R * x.v * dt);
   F.block<3, 3>(0, 6) = R * dt;
-  F.block<3, 3>(3, 9) = R * geometry::so3LeftJacobian(x_.w * dt) * dt;
+  F.block<3, 3>(3, 9) = R * geometry::so3LeftJacobian(x.w * dt) * dt;
   F.block<3, 3>(6, 6) = opt_.gamma * Eigen::Matrix3d::Identity();
   F.block<3, 3>(9, 9) = opt_.lambda * Eigen::Matrix3d::Identity();
   return F;
@@ -400,8 +403,10 @@ Eigen::MatrixXd Eskf::processNoise(double dt) const {
   return Q;
 }
 
-Eigen::Matrix3d Eskf::landmarkProcessNoise(double dt) const {
-  const Eigen::Matrix3d R = geometry::toRotationMatrix(x_.q);
+Eigen::Matrix3d Eskf::landmarkProcessNoise(double dt) const { return landmarkProcessNoiseAt(x_, dt); }
+
+Eigen::Matrix3d Eskf::landmarkProcessNoiseAt(const RigState& x, double dt) const {
+  const Eigen::Matrix3d R = geometry::toRotationMatrix(x.q);
   return R * Eigen::Vector3d(opt_.landmark_walk.array().square() * dt).asDiagonal() * R.transpose();
 }
 
@@ -686,6 +691,85 @@ Eskf::UpdateResult Eskf::updateGyro(const Eigen::Vector3d& z, const Eigen::Matri
   Eigen::VectorXd y;
   buildGyroRow(z, C, &rows, &y);
   return sparseUpdate(rows, y);
+}
+
+Eskf::UpdateResult Eskf::propagateWithGyro(const std::vector<GyroStep>& steps) {
+  for (size_t i = 0; i < steps.size(); ++i) {
+    const std::string tag = "Eskf::propagateWithGyro: step " + std::to_string(i);
+    if (!std::isfinite(steps[i].dt) || steps[i].dt < 0.0) fail(tag + ": dt = " + str(steps[i].dt) + " must be finite and >= 0");
+    checkMeasurement(steps[i].z, steps[i].C, tag);
+  }
+  UpdateResult res;
+  if (steps.empty()) return res;
+  // Everything is done on rig-sized copies and committed at the end, so a throw leaves the filter unchanged.
+  const int r = rd_, L = dim() - rd_;
+  RigState x = x_;
+  Eigen::MatrixXd P = C_.topLeftCorner(r, r);
+  Eigen::MatrixXd T = Eigen::MatrixXd::Identity(r, r), A = Eigen::MatrixXd::Zero(r, r);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(r);
+  Eigen::Matrix3d Qm = Eigen::Matrix3d::Zero();  // summed landmark walk: additive, so it commutes with the rest
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, r);
+  H.middleCols<3>(9).setIdentity();
+  if (r == 15) H.middleCols<3>(12).setIdentity();
+  const bool walk = !(opt_.landmark_walk.array() == 0.0).all();
+  for (const GyroStep& st : steps) {
+    if (st.dt > 0.0) {
+      const Eigen::MatrixXd F = transitionJacobianAt(x, st.dt);
+      P = (F * P * F.transpose() + processNoise(st.dt)).eval();
+      P = (0.5 * (P + P.transpose())).eval();
+      T = (F * T).eval();
+      if (walk) Qm += landmarkProcessNoiseAt(x, st.dt);
+      x = propagateNominal(x, st.dt, opt_.gamma, opt_.lambda);
+    }
+    const Eigen::Matrix3d Rn = 0.5 * (st.C + st.C.transpose());
+    Eigen::Matrix3d S = H * P * H.transpose() + Rn;
+    S = (0.5 * (S + S.transpose())).eval();
+    const Eigen::LLT<Eigen::Matrix3d> llt(S);
+    if (llt.info() != Eigen::Success)
+      throw std::runtime_error("Eskf::propagateWithGyro: innovation covariance is not positive definite");
+    const Eigen::Vector3d y = st.z - predictGyro(x);
+    const Eigen::MatrixXd HT = H * T;                  // 3 x r
+    const Eigen::MatrixXd SinvHT = llt.solve(HT);      // S^-1 H T
+    A.noalias() += HT.transpose() * SinvHT;
+    b.noalias() += SinvHT.transpose() * y;
+    res.nis += y.dot(llt.solve(y));
+    res.dof += 3;
+    ++res.used;
+    const Eigen::MatrixXd K = llt.solve(H * P).transpose();  // P H^T S^-1 (P, S symmetric)
+    const Eigen::VectorXd dx = K * y;
+    Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(r, r);
+    IKH.noalias() -= K * H;
+    P = (IKH * P * IKH.transpose() + K * Rn * K.transpose()).eval();
+    T = (IKH * T).eval();
+    x = retract(x, dx);
+    const Eigen::Matrix3d G = resetJacobian(dx.segment<3>(3));  // G = I but on the angular rows
+    P.middleRows<3>(3) = (G * P.middleRows<3>(3)).eval();
+    P.middleCols<3>(3) = (P.middleCols<3>(3) * G.transpose()).eval();
+    P = (0.5 * (P + P.transpose())).eval();
+    T.middleRows<3>(3) = (G * T.middleRows<3>(3)).eval();
+  }
+  if (L > 0) {
+    const Eigen::MatrixXd Crm0 = C_.block(0, r, r, L);
+    // C_mm -= C_mr A C_rm as the symmetric downdate X X^T, X = C_mr V sqrt(Lambda) (A = V Lambda V^T, PSD).
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
+    const Eigen::VectorXd lam = es.eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    Eigen::MatrixXd X = Eigen::MatrixXd::Zero(dim(), r);
+    X.bottomRows(L).noalias() = Crm0.transpose() * (es.eigenvectors() * lam.asDiagonal());
+    lowerUpdate(C_, X, X, -1.0, opt_.threads, opt_.blas_downdate);
+    const Eigen::VectorXd dm = Crm0.transpose() * b;
+    C_.block(r, 0, L, r) = (T * Crm0).transpose();  // lower triangle; the mirror writes C_rm
+    C_.topLeftCorner(r, r) = P;
+    mirrorLower(C_, opt_.threads);
+    for (int j = 0; j < capacity(); ++j)
+      if (active_[j]) {
+        lm_[j] += dm.segment<3>(3 * j);
+        if (walk) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += 0.5 * (Qm + Qm.transpose());
+      }
+  } else {
+    C_ = P;
+  }
+  x_ = x;
+  return res;
 }
 
 Eskf::UpdateResult Eskf::updateGyroDense(const Eigen::Vector3d& z, const Eigen::Matrix3d& C) {

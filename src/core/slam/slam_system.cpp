@@ -99,6 +99,9 @@ void SlamSystem::addGyro(double time, const Eigen::Vector3d& omega, const Eigen:
 }
 
 void SlamSystem::predictTo(double t, FrameStats* stats) {
+  // Predict to each gyro sample and fuse it, in one call: the filter carries the steps on the rig block
+  // and updates the landmark blocks once (Eskf::propagateWithGyro).
+  std::vector<Eskf::GyroStep> steps;
   while (!gyro_.empty() && gyro_.front().first <= t) {
     const auto g = gyro_.front();
     gyro_.pop_front();
@@ -106,13 +109,11 @@ void SlamSystem::predictTo(double t, FrameStats* stats) {
       ++stats->gyro_dropped;
       continue;
     }
-    if (g.first > time_) {
-      filter_.predict(g.first - time_);
-      time_ = g.first;
-    }
-    filter_.updateGyro(g.second.first, g.second.second);
+    steps.push_back({g.first - time_, g.second.first, g.second.second});
+    time_ = g.first;
     ++stats->gyro_used;
   }
+  filter_.propagateWithGyro(steps);
   if (t > time_) {
     filter_.predict(t - time_);
     time_ = t;

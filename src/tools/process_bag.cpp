@@ -2,7 +2,8 @@
 /**
  * process_bag --bag FILE.bag --out DIR [--config slam.yaml] [--gyro] [--known-map MAP.csv]
  *             [--features kaze|akaze|orb] [--frames N] [--set key=value ...] [--ns NAMESPACE]
- *             [--input auto|images|landmarks] [--ate-align auto|none|first_pose|se3] [--ate-max-dt S] [--quiet]
+ *             [--input auto|images|landmarks] [--ate-align auto|none|first_pose|se3] [--ate-max-dt S] [--serial]
+ *             [--quiet]
  *
  * Runs a recorded or simulated session through the same core code as the nodelets, without a ROS master,
  * as fast as the CPU allows: landmark bags (stereo/landmarks) go straight into the ES-EKF SLAM, image bags
@@ -26,6 +27,11 @@
  * raw images and the front end's stereo/landmarks (record -a of a running rig) is processed from the images
  * (--input landmarks replays the recorded landmarks instead).
  *
+ * Image bags run as a two-stage pipeline on two threads: the front end (features, matching, triangulation) of
+ * pair k runs while the SLAM processes pair k-1. The SLAM sees the same frames and gyro samples in the same
+ * order, so the results are the same as with --serial (one stage after the other), which only serves to measure
+ * the gain. summary.yaml gives both stages' ms per frame (front_end_ms_per_frame, slam_ms_per_frame).
+ *
  * Exit codes: 0 ok, 1 bad configuration or data, 2 bad command line, 3 cannot write the output.
  */
 #include <geometry_msgs/PoseStamped.h>
@@ -41,9 +47,11 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <future>
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -74,7 +82,8 @@ const char* kUsage =
     "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win)\n"
     "  --gyro       fuse imu/data (thesis experiment 3); same as --set use_gyro=true\n"
     "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
-    "  --features   front end for image bags (default kaze; akaze/orb also set max_descriptor_distance 5.5)\n"
+    "  --features   front end for image bags: akaze (default, as the rig's launch files), kaze or orb; akaze and orb\n"
+    "               also set max_descriptor_distance 5.5 (binary descriptors; a --config or --set still wins)\n"
     "  --frames     process at most N frames\n"
     "  --set        override one SLAM parameter (repeatable)\n"
     "  --ns         the bag's topics are under this namespace (e.g. rig1 for /rig1/stereo/...; '/' = the root);\n"
@@ -84,15 +93,17 @@ const char* kUsage =
     "               the SLAM's, i.e. its first pose is the first estimate's, else se3) | none | first_pose | se3;\n"
     "               ate_se3 (SE(3)-aligned, as evo_ape --align) is always written too\n"
     "  --ate-max-dt time association tolerance of the ATE, s (default 0.01, as evo)\n"
+    "  --serial     image bags: run the front end and the SLAM one after the other instead of overlapping them on\n"
+    "               two threads (same results; for timing comparisons)\n"
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
     "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n";
 
 struct Args {
-  std::string bag, out, known_map, features = "kaze", ns, input = "auto", ate_align = "auto";
+  std::string bag, out, known_map, features = "akaze", ns, input = "auto", ate_align = "auto";
   double ate_max_dt = 0.01;
   std::vector<std::string> configs;
   std::vector<std::pair<std::string, std::string>> sets;
-  bool gyro = false, quiet = false, induration = false;
+  bool gyro = false, quiet = false, induration = false, serial = false;
   int frames = -1;
   std::vector<std::string> command_line;
 };
@@ -109,14 +120,14 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   return p;
 }
 
-/** The SLAM options of a run: config/slam.yaml's defaults, the front end's association distance, --config
- *  files, --gyro, --set, validated. */
-slam::SlamOptions slamOptionsOf(const Args& a) {
+/** The SLAM options of a run: config/slam.yaml's defaults, the front end's association distance (image input
+ *  only: a landmark bag's descriptors are the recorded ones), --config files, --gyro, --set, validated. */
+slam::SlamOptions slamOptionsOf(const Args& a, bool use_images) {
   slam::SlamOptions opt;
   // Binary descriptors (AKAZE, ORB: one float 0/1 per bit, L2 = sqrt(Hamming)) need a wider association
   // distance than KAZE's unit-norm floats (config/slam.yaml's 0.3 accepts only identical bit strings):
   // Hamming <= 30, as launch/rig.launch and replay_globe.launch set it; a config file or --set still wins.
-  if (a.features != "kaze") slam::setSlamOption(&opt, "max_descriptor_distance", "5.5");
+  if (use_images && a.features != "kaze") slam::setSlamOption(&opt, "max_descriptor_distance", "5.5");
   for (const auto& c : a.configs) slam::applySlamOptions(&opt, c);
   if (a.gyro) opt.use_gyro = true;
   for (const auto& kv : a.sets) slam::setSlamOption(&opt, kv.first, kv.second);
@@ -148,14 +159,6 @@ bool useImages(const Args& a, const ros_io::BagTopics& topics) {
 }
 
 int run(const Args& a) {
-  const slam::SlamOptions opt = slamOptionsOf(a);
-  slam::SlamSystem slam(opt);
-
-  if (!a.known_map.empty()) {
-    const auto known = slam::readLandmarkMap(a.known_map);
-    slam.setKnownMap(known.first, known.second);
-  }
-
   rosbag::Bag bag;
   ros_io::openForReading(&bag, a.bag);
   const ros_io::BagTopics topics(bag, a.bag,
@@ -164,6 +167,12 @@ int run(const Args& a) {
                                   "ground_truth/pose"},
                                  a.ns);
   const bool use_images = useImages(a, topics);
+  const slam::SlamOptions opt = slamOptionsOf(a, use_images);
+  slam::SlamSystem slam(opt);
+  if (!a.known_map.empty()) {
+    const auto known = slam::readLandmarkMap(a.known_map);
+    slam.setKnownMap(known.first, known.second);
+  }
   std::vector<std::string> read = topics.stored();
   read.erase(std::remove_if(read.begin(), read.end(),
                             [&](const std::string& t) {
@@ -188,7 +197,8 @@ int run(const Args& a) {
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   common::Progress progress(expected, a.quiet);
   const auto t_start = std::chrono::steady_clock::now();
-  double frame_seconds = 0.0;
+  double frame_seconds = 0.0, front_end_seconds = 0.0;
+  int front_end_frames = 0;
 
   auto frame = [&](const ros::Time& stamp, const std::vector<slam::Measurement>& m) {
     const double t = secs(stamp);
@@ -212,8 +222,32 @@ int run(const Args& a) {
     progress.tick(frames, detail);
   };
 
+  // The pipeline's second stage input: a pair whose front end runs (or, with --serial, will run) elsewhere.
+  struct FrontEndResult {
+    std::vector<slam::Measurement> measurements;
+    double seconds = 0.0;
+  };
+  struct PendingPair {
+    ros::Time stamp;
+    std::future<FrontEndResult> result;
+  };
+  std::optional<PendingPair> pending;
+  // The front end's result of a pending pair, or nothing (the pair is counted as dropped) when it failed.
+  auto take = [&](PendingPair* p) -> std::optional<FrontEndResult> {
+    try {
+      FrontEndResult r = p->result.get();
+      front_end_seconds += r.seconds;
+      ++front_end_frames;
+      return r;
+    } catch (const std::exception& e) {
+      ++bad_frames;
+      std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(p->stamp), e.what());
+      return std::nullopt;
+    }
+  };
+
   for (const rosbag::MessageInstance& mi : view) {
-    if (a.frames >= 0 && frames >= a.frames) break;
+    if (a.frames >= 0 && frames + (pending ? 1 : 0) >= a.frames) break;
     const std::string topic = topics.relative(mi.getTopic());
     if (topic == "ground_truth/pose") {
       truth.push_back(fromPoseMsg(*mi.instantiate<geometry_msgs::PoseStamped>()));
@@ -232,23 +266,49 @@ int run(const Args& a) {
     }
     // Process the complete pairs in stamp order once both camera_infos are known.
     sensor_msgs::Image::ConstPtr left, right;
-    while (!(a.frames >= 0 && frames >= a.frames) && pairs_in.next(&left, &right)) {
+    while (!(a.frames >= 0 && frames + (pending ? 1 : 0) >= a.frames) && pairs_in.next(&left, &right)) {
       if (!matcher) {
         fo.disparity_offset = pairs_in.leftInfo().P(0, 2) - pairs_in.rightInfo().P(0, 2);
         matcher = std::make_unique<stereo::StereoFeatureMatcher>(fo);
       }
+      cv::Mat L, R;
       try {
-        const cv::Mat L = pairs_in.rectifyLeft(*left);
-        const cv::Mat R = pairs_in.rectifyRight(*right);
-        const auto lms = stereo::triangulateMatches(pairs_in.leftInfo(), pairs_in.rightInfo(), matcher->process(L, R), to);
-        std::vector<slam::Measurement> m;
-        for (const auto& l : lms) m.push_back({l.position, l.covariance, l.descriptor, l.strength});
-        frame(left->header.stamp, m);
+        L = pairs_in.rectifyLeft(*left);
+        R = pairs_in.rectifyRight(*right);
       } catch (const std::exception& e) {
         ++bad_frames;
         std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(left->header.stamp), e.what());
+        continue;
+      }
+      // One front end at a time (it owns the matcher): the previous pair's result is taken before this one starts,
+      // then the SLAM processes the previous pair while this pair's front end runs.
+      std::optional<PendingPair> previous = std::move(pending);
+      pending.reset();
+      std::optional<FrontEndResult> previous_result;
+      if (previous) previous_result = take(&*previous);
+      auto work = [&matcher, L, R, li = pairs_in.leftInfo(), ri = pairs_in.rightInfo(), to]() {
+        const auto t0 = std::chrono::steady_clock::now();
+        const auto lms = stereo::triangulateMatches(li, ri, matcher->process(L, R), to);
+        FrontEndResult r;
+        for (const auto& l : lms) r.measurements.push_back({l.position, l.covariance, l.descriptor, l.strength});
+        r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        return r;
+      };
+      pending = PendingPair{left->header.stamp,
+                            std::async(a.serial ? std::launch::deferred : std::launch::async, work)};
+      if (previous_result) frame(previous->stamp, previous_result->measurements);
+      if (a.serial) {  // the deferred front end runs now, on this thread, and its frame right after it
+        previous = std::move(pending);
+        pending.reset();
+        previous_result = take(&*previous);
+        if (previous_result) frame(previous->stamp, previous_result->measurements);
       }
     }
+  }
+  if (pending) {  // the last pair
+    const std::optional<FrontEndResult> r = take(&*pending);
+    if (r) frame(pending->stamp, r->measurements);
+    pending.reset();
   }
   progress.done();
   if (frames == 0)
@@ -272,6 +332,9 @@ int run(const Args& a) {
               {"front_end", matcher ? a.features : "none (landmark bag)"},
               {"topics", topics.summary()},
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
+              {"front_end_ms_per_frame",
+               front_end_frames > 0 ? std::to_string(1e3 * front_end_seconds / front_end_frames) : "none"},
+              {"pipeline", !matcher ? "none (landmark bag)" : a.serial ? "serial (--serial)" : "front end || SLAM, 2 threads"},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);
   common::writeParameters(a.out + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml", a.command_line,
@@ -307,6 +370,7 @@ int main(int argc, char** argv) {
     else if (k == "--frames") a.frames = std::atoi(value().c_str());
     else if (k == "--gyro") a.gyro = true;
     else if (k == "--quiet") a.quiet = true;
+    else if (k == "--serial") a.serial = true;
     else if (k == "--induration") a.induration = true;
     else if (k == "--set") {
       const std::string kv = value();

@@ -131,6 +131,33 @@ void lowerUpdate(Eigen::MatrixXd& C, const Eigen::MatrixXd& X, const Eigen::Matr
   });
 }
 
+// U <- U L^-T for the lower-triangular Cholesky factor L of S (m x m): the rows of U are independent, so they are
+// split over the threads; each part through OpenBLAS's dtrsm (run-time CPU kernels) when use_blas, else Eigen.
+void solveRightLowerTransposed(Eigen::MatrixXd& U, const Eigen::MatrixXd& L, int threads, bool use_blas) {
+  const int n = static_cast<int>(U.rows()), m = static_cast<int>(U.cols());
+  if (n == 0 || m == 0) return;
+  const int parts = usefulThreads(n, threads);
+#ifdef SKIN3D_HAVE_OPENBLAS
+  if (use_blas) useSerialBlas();
+#else
+  use_blas = false;
+#endif
+  runParallel(parts, [&](int k) {
+    const int r0 = static_cast<int>(static_cast<long>(n) * k / parts);
+    const int r1 = static_cast<int>(static_cast<long>(n) * (k + 1) / parts);
+    if (r1 <= r0) return;
+#ifdef SKIN3D_HAVE_OPENBLAS
+    if (use_blas) {
+      cblas_dtrsm(CblasColMajor, CblasRight, CblasLower, CblasTrans, CblasNonUnit, r1 - r0, m, 1.0, L.data(),
+                  static_cast<int>(L.outerStride()), U.data() + r0, static_cast<int>(U.outerStride()));
+      return;
+    }
+#endif
+    auto rows = U.middleRows(r0, r1 - r0);
+    L.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(rows);
+  });
+}
+
 // Copies the strict lower triangle onto the upper one (exact symmetry), in cache-sized tiles.
 void mirrorLower(Eigen::MatrixXd& C, int threads) {
   const int n = static_cast<int>(C.rows());
@@ -593,7 +620,8 @@ Eskf::UpdateResult Eskf::sparseUpdate(const std::vector<BlockRow>& rows, const E
 
   // S = L L^T; U = A L^-T; K = C H^T S^-1 = U L^-1; e = L^-1 y; dx = K y = U e; NIS = |e|^2.
   Eigen::MatrixXd U = A;
-  llt.matrixU().solveInPlace<Eigen::OnTheRight>(U);
+  const Eigen::MatrixXd Lf = llt.matrixL();
+  solveRightLowerTransposed(U, Lf, opt_.threads, opt_.blas_downdate);
   const Eigen::VectorXd e = llt.matrixL().solve(y);
   Eigen::VectorXd dx;
   if (!opt_.joseph_explicit_gain) {

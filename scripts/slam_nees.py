@@ -1,0 +1,168 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: BSD-3-Clause
+"""Pose consistency of SLAM runs: the normalised estimation error squared (NEES) of the pose, per frame, from
+process_bag results directories with ground truth, and over Monte Carlo runs its average against the chi^2 band.
+
+Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] RESULTS_DIR [RESULTS_DIR ...]
+
+Each RESULTS_DIR holds trajectory.tum, ground_truth.tum (the bag's ground_truth/pose, in the SLAM's world:
+process_bag writes it) and rig_covariance.csv. Per frame k and run i the pose error is
+e = [p_true - p_est, Log(R_true R_est^T)] (m, rad: the true state minus the estimate, with the filter's global angular error
+R_true = Exp(dtheta) R_est; both parts must have that same sign),
+NEES_ik = e^T P^-1 e with P the 6x6 [p, theta] block of the rig covariance (6 dof). Frames whose P is singular
+(the first frame: its pose defines the world and is exactly known) are skipped.
+
+Over N runs the average NEES of a frame, times N, is chi^2 with 6 N dof when the filter is consistent: the
+two-sided band at --confidence is [chi2((1-c)/2, 6N), chi2((1+c)/2, 6N)] / N (Bar-Shalom, Li, Kirubarajan 2001,
+ch. 5.4). Prints the band, the share of frames inside it, below it (pessimistic) and above it (optimistic),
+the mean NEES over all frames and runs, and for each run the share of its frames beyond chi2(c, 6).
+Exit code 0 when the share inside is at least --min-inside, 1 when not, 2 on bad input.
+"""
+import argparse
+import math
+import os
+import sys
+
+import numpy as np
+
+
+def chi2_quantile(p, k):
+    """chi^2 quantile (Wilson-Hilferty; relative error < 1e-3 for k >= 6 and 0.01 <= p <= 0.99)."""
+    z = normal_quantile(p)
+    h = 2.0 / (9.0 * k)
+    return k * (1.0 - h + z * math.sqrt(h)) ** 3
+
+
+def normal_quantile(p):
+    """Standard normal quantile by bisection on erf (no scipy on the rig)."""
+    lo, hi = -10.0, 10.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def read_tum(path):
+    rows = [l.split() for l in open(path) if l.strip() and not l.startswith("#")]
+    if not rows:
+        raise ValueError("'%s' has no poses" % path)
+    a = np.array([[float(v) for v in r[:8]] for r in rows])
+    return a[:, 0], a[:, 1:4], a[:, 4:8]  # t, p, q = (x, y, z, w)
+
+
+def rotation(q):
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def so3_log(R):
+    c = max(-1.0, min(1.0, 0.5 * (np.trace(R) - 1.0)))
+    angle = math.acos(c)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-9:
+        return 0.5 * v
+    return angle / (2.0 * math.sin(angle)) * v
+
+
+def read_covariances(path):
+    """Per frame t and the 6x6 [p, theta] block of the rig covariance (rig_covariance.csv, row-major)."""
+    lines = [l for l in open(path) if not l.startswith("#")]
+    header = lines[0].strip().split(",")
+    dim = int(round(math.sqrt(len(header) - 1)))
+    if dim * dim != len(header) - 1:
+        raise ValueError("'%s': %d covariance columns is not a square" % (path, len(header) - 1))
+    t, P = [], []
+    for l in lines[1:]:
+        v = np.array([float(x) for x in l.split(",")])
+        t.append(v[0])
+        P.append(v[1:].reshape(dim, dim)[:6, :6])
+    return np.array(t), P
+
+
+def run_nees(d):
+    """Per-frame pose NEES of one results directory: dict t -> NEES (frames with a singular P left out)."""
+    for f in ("trajectory.tum", "ground_truth.tum", "rig_covariance.csv"):
+        if not os.path.exists(os.path.join(d, f)):
+            raise ValueError("'%s' has no %s (process_bag on a bag with ground_truth/pose writes it)" % (d, f))
+    te, pe, qe = read_tum(os.path.join(d, "trajectory.tum"))
+    tg, pg, qg = read_tum(os.path.join(d, "ground_truth.tum"))
+    tc, P = read_covariances(os.path.join(d, "rig_covariance.csv"))
+    out = {}
+    for k, t in enumerate(te):
+        j = int(np.argmin(np.abs(tg - t)))
+        c = int(np.argmin(np.abs(tc - t)))
+        if abs(tg[j] - t) > 1e-3 or abs(tc[c] - t) > 1e-6:
+            continue
+        e = np.concatenate([pg[j] - pe[k], so3_log(rotation(qg[j]) @ rotation(qe[k]).T)])
+        Pk = 0.5 * (P[c] + P[c].T)
+        w = np.linalg.eigvalsh(Pk)
+        if w.min() <= 1e-12 * max(w.max(), 1e-300):
+            continue
+        out[round(t, 6)] = float(e @ np.linalg.solve(Pk, e))
+    if not out:
+        raise ValueError("'%s': no frame has both a ground-truth pose and a regular pose covariance" % d)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("dirs", nargs="+", metavar="RESULTS_DIR")
+    ap.add_argument("--confidence", type=float, default=0.95)
+    ap.add_argument("--min-inside", type=float, default=0.9)
+    ap.add_argument("--plot", default="")
+    a = ap.parse_args()
+    if not 0.5 < a.confidence < 1.0:
+        sys.exit("slam_nees: --confidence must be in (0.5, 1)")
+    try:
+        runs = [run_nees(d) for d in a.dirs]
+    except (ValueError, OSError) as e:
+        print("slam_nees: %s" % e, file=sys.stderr)
+        return 2
+    frames = sorted(set.intersection(*[set(r) for r in runs]))
+    if not frames:
+        print("slam_nees: the runs share no frame time (same dataset length and rate?)", file=sys.stderr)
+        return 2
+    n = len(runs)
+    avg = np.array([np.mean([r[t] for r in runs]) for t in frames])
+    lo = chi2_quantile(0.5 * (1.0 - a.confidence), 6 * n) / n
+    hi = chi2_quantile(0.5 * (1.0 + a.confidence), 6 * n) / n
+    inside = np.mean((avg >= lo) & (avg <= hi))
+    print("runs: %d, frames compared: %d; %.0f %% band of the average pose NEES (6 dof): [%.2f, %.2f]"
+          % (n, len(frames), 100 * a.confidence, lo, hi))
+    print("frames inside: %.1f %%, below (pessimistic): %.1f %%, above (optimistic): %.1f %%"
+          % (100 * inside, 100 * np.mean(avg < lo), 100 * np.mean(avg > hi)))
+    allv = np.array([v for r in runs for v in r.values()])
+    print("mean NEES over all frames and runs: %.2f (expected 6); median %.2f (expected %.2f)"
+          % (allv.mean(), np.median(allv), chi2_quantile(0.5, 6)))
+    single = chi2_quantile(a.confidence, 6)
+    for d, r in zip(a.dirs, runs):
+        v = np.array(list(r.values()))
+        print("  %s: %d frames, mean NEES %.2f, beyond chi2(%.2f, 6) = %.1f: %.1f %% (expected %.0f %%)"
+              % (d, len(v), v.mean(), a.confidence, single, 100 * np.mean(v > single), 100 * (1 - a.confidence)))
+    if a.plot:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        t0 = frames[0]
+        x = np.array(frames) - t0
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        ax.semilogy(x, avg, "k-", lw=1, label="average pose NEES over %d runs" % n)
+        ax.axhline(lo, color="g", ls="--", label="%.0f %% band [%.2f, %.2f]" % (100 * a.confidence, lo, hi))
+        ax.axhline(hi, color="g", ls="--")
+        ax.axhline(6, color="0.5", ls=":", label="6 (dof)")
+        ax.set_xlabel("time since the first compared frame (s)")
+        ax.set_ylabel("NEES")
+        ax.set_title("pose NEES: %.0f %% of the frames inside the band" % (100 * inside))
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(a.plot, dpi=100)
+    return 0 if inside >= a.min_inside else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,127 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: BSD-3-Clause
+"""Checks scripts/slam_nees.py on synthetic results directories whose truth is known here.
+
+usage: check_nees.py [--xunit FILE.xml]
+
+20 runs x 60 frames: a curved true trajectory, a random correlated 6x6 pose covariance per frame (position and
+attitude strongly coupled, as on an orbit), and an estimate whose error true - estimate is drawn from that
+covariance (seeded). A consistent filter must be judged consistent; the same errors with the attitude part's
+sign flipped (the sign mistake the first version of slam_nees.py made), and a covariance 4x too small, must not;
+a directory without ground truth is a clear error (exit 2).
+"""
+import argparse
+import math
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from xunit import write_xunit  # noqa: E402
+
+SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "slam_nees.py")
+
+
+def exp_so3(w):
+    a = np.linalg.norm(w)
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if a < 1e-12:
+        return np.eye(3) + K
+    return np.eye(3) + math.sin(a) / a * K + (1 - math.cos(a)) / a ** 2 * K @ K
+
+
+def quat(R):
+    w = math.sqrt(max(1e-12, 1 + np.trace(R))) / 2
+    return np.array([(R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w), w])
+
+
+def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0):
+    os.makedirs(d)
+    head = "# skin3d trajectory: t x y z qx qy qz qw\n"
+    names = ["P_%d_%d" % (i, j) for i in range(12) for j in range(12)]
+    with open(d + "/trajectory.tum", "w") as fe, open(d + "/ground_truth.tum", "w") as fg, \
+            open(d + "/rig_covariance.csv", "w") as fc:
+        fe.write(head)
+        fg.write(head)
+        fc.write("# synthetic\nt," + ",".join(names) + "\n")
+        for k in range(frames):
+            t = 1000.0 + 0.1 * k
+            ang = 0.2 * 0.1 * k
+            p = np.array([0.2 * math.sin(ang), 0.0, 0.2 * (1 - math.cos(ang))])
+            R = exp_so3(np.array([0.0, -ang, 0.0]))
+            # correlated pose covariance: position error ~ lever arm x attitude error + small independent parts
+            A = np.zeros((6, 6))
+            A[3:, 3:] = np.diag(rng.uniform(0.5e-3, 2e-3, 3))
+            lever = np.array([0.0, 0.0, 0.2])
+            A[:3, 3:] = -np.array([[0, -lever[2], lever[1]], [lever[2], 0, -lever[0]], [-lever[1], lever[0], 0]]) @ A[3:, 3:]
+            A[:3, :3] = np.diag(rng.uniform(0.05e-3, 0.1e-3, 3))
+            P = A @ A.T
+            e = np.linalg.cholesky(P) @ rng.standard_normal(6)  # true - estimate
+            pe = p - e[:3]
+            Re = exp_so3(-angle_sign * e[3:]) @ R  # R_true = Exp(dtheta) R_est
+            fg.write("%.9f %s %s\n" % (t, " ".join("%.12g" % v for v in p), " ".join("%.12g" % v for v in quat(R))))
+            fe.write("%.9f %s %s\n" % (t, " ".join("%.12g" % v for v in pe), " ".join("%.12g" % v for v in quat(Re))))
+            full = np.zeros((12, 12))
+            full[:6, :6] = cov_scale * P
+            full[6:, 6:] = np.eye(6) * 1e-4
+            fc.write("%.9f," % t + ",".join("%.17g" % v for v in full.ravel()) + "\n")
+
+
+def run_script(dirs):
+    r = subprocess.run([sys.executable, SCRIPT] + dirs, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                       universal_newlines=True)
+    return r.returncode, r.stdout
+
+
+def inside_share(text):
+    for line in text.splitlines():
+        if line.startswith("frames inside:"):
+            return float(line.split()[2])
+    return -1.0
+
+
+def checks(tmp):
+    results = []
+    rng = np.random.default_rng(7)
+    for name, sign, scale in (("consistent", 1.0, 1.0), ("angle_sign_flipped", -1.0, 1.0),
+                              ("overconfident_4x", 1.0, 0.25)):
+        dirs = []
+        for i in range(20):
+            d = os.path.join(tmp, "%s_%02d" % (name, i))
+            write_run(d, rng, 60, sign, scale)
+            dirs.append(d)
+        rc, text = run_script(dirs)
+        share = inside_share(text)
+        if name == "consistent":
+            ok = rc == 0 and share >= 90.0
+        else:
+            ok = rc == 1 and share < 50.0
+        results.append((name, "" if ok else "exit %d, %.1f %% inside:\n%s" % (rc, share, text)))
+        print("check_nees: %s: exit %d, %.1f %% of frames inside" % (name, rc, share))
+    bad = os.path.join(tmp, "no_truth")
+    os.makedirs(bad)
+    open(bad + "/trajectory.tum", "w").write("1000 0 0 0 0 0 0 1\n")
+    rc, text = run_script([bad])
+    ok = rc == 2 and "ground_truth.tum" in text
+    results.append(("missing_ground_truth", "" if ok else "exit %d: %s" % (rc, text)))
+    return results
+
+
+def main():
+    ap = argparse.ArgumentParser(usage=__doc__)
+    ap.add_argument("--xunit")
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        results = checks(tmp)
+    for name, msg in results:
+        print("nees: %s: %s" % (name, "FAIL: " + msg if msg else "ok"))
+    if a.xunit:
+        write_xunit(a.xunit, "nees", results)
+    return 1 if any(m for _, m in results) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

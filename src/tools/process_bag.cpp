@@ -47,6 +47,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <future>
 #include <iostream>
 #include <map>
@@ -158,6 +159,90 @@ bool useImages(const Args& a, const ros_io::BagTopics& topics) {
   return use_images;
 }
 
+/** Image pairs through the front end (features, matching, triangulation), overlapped with the SLAM: submit()
+ *  starts pair k's front end on a second thread, then hands pair k-1's measurements to the sink (the SLAM) on the
+ *  calling thread. One front end runs at a time (it owns the matcher), so the sink sees the pairs in order. With
+ *  serial, each pair's front end and its sink run one after the other on the calling thread. */
+class FrontEndPipeline {
+ public:
+  using Sink = std::function<void(const ros::Time&, const std::vector<slam::Measurement>&)>;
+  FrontEndPipeline(const stereo::FeatureOptions& options, bool serial, Sink sink)
+      : fo_(options), serial_(serial), sink_(std::move(sink)) {}
+  ~FrontEndPipeline() {
+    if (pending_ && pending_->result.valid()) pending_->result.wait();  // never leave a front end running
+  }
+
+  bool started() const { return matcher_ != nullptr; }
+  int inFlight() const { return pending_ ? 1 : 0; }  //!< pairs submitted and not yet handed to the sink
+  int dropped() const { return dropped_; }           //!< pairs whose front end failed
+  double secondsPerPair() const { return pairs_ > 0 ? seconds_ / pairs_ : 0.0; }
+
+  void submit(const ros::Time& stamp, const cv::Mat& L, const cv::Mat& R, const geometry::CameraInfo& li,
+              const geometry::CameraInfo& ri) {
+    if (!matcher_) {
+      fo_.disparity_offset = li.P(0, 2) - ri.P(0, 2);
+      matcher_ = std::make_unique<stereo::StereoFeatureMatcher>(fo_);
+    }
+    std::optional<Pending> previous = std::move(pending_);
+    pending_.reset();
+    std::optional<std::vector<slam::Measurement>> previous_m;
+    if (previous) previous_m = take(&*previous);  // before the next front end starts: one at a time
+    stereo::StereoFeatureMatcher* matcher = matcher_.get();
+    auto work = [matcher, L, R, li, ri]() {
+      const auto t0 = std::chrono::steady_clock::now();
+      const stereo::TriangulateOptions to;
+      const auto lms = stereo::triangulateMatches(li, ri, matcher->process(L, R), to);
+      Result r;
+      for (const auto& l : lms) r.measurements.push_back({l.position, l.covariance, l.descriptor, l.strength});
+      r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      return r;
+    };
+    pending_ = Pending{stamp, std::async(serial_ ? std::launch::deferred : std::launch::async, work)};
+    if (previous_m) sink_(previous->stamp, *previous_m);
+    if (serial_) finish();  // the deferred front end runs now, then its frame
+  }
+
+  /** Hands the pair still in the front end (if any) to the sink. */
+  void finish() {
+    if (!pending_) return;
+    Pending p = std::move(*pending_);
+    pending_.reset();
+    const auto m = take(&p);
+    if (m) sink_(p.stamp, *m);
+  }
+
+ private:
+  struct Result {
+    std::vector<slam::Measurement> measurements;
+    double seconds = 0.0;
+  };
+  struct Pending {
+    ros::Time stamp;
+    std::future<Result> result;
+  };
+  // The measurements of a pending pair, or nothing (the pair is counted as dropped) when its front end failed.
+  std::optional<std::vector<slam::Measurement>> take(Pending* p) {
+    try {
+      Result r = p->result.get();
+      seconds_ += r.seconds;
+      ++pairs_;
+      return std::move(r.measurements);
+    } catch (const std::exception& e) {
+      ++dropped_;
+      std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", p->stamp.toSec(), e.what());
+      return std::nullopt;
+    }
+  }
+
+  stereo::FeatureOptions fo_;
+  bool serial_;
+  Sink sink_;
+  std::unique_ptr<stereo::StereoFeatureMatcher> matcher_;
+  std::optional<Pending> pending_;
+  int pairs_ = 0, dropped_ = 0;
+  double seconds_ = 0.0;
+};
+
 int run(const Args& a) {
   rosbag::Bag bag;
   ros_io::openForReading(&bag, a.bag);
@@ -186,19 +271,16 @@ int run(const Args& a) {
 
   std::vector<slam::StampedPose> trajectory, truth;
   std::vector<slam::StateRow> rows;
-  std::unique_ptr<stereo::StereoFeatureMatcher> matcher;
   ros_io::StereoPairs pairs_in;
   stereo::FeatureOptions fo;
   fo.type = stereo::parseFeatureType(a.features);
-  const stereo::TriangulateOptions to;
   int frames = 0, bad_frames = 0;
   // frames to expect, for the progress line: landmark messages, or else left images
   int expected = static_cast<int>(use_images ? topics.count("stereo/left/image_raw") : topics.count("stereo/landmarks"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   common::Progress progress(expected, a.quiet);
   const auto t_start = std::chrono::steady_clock::now();
-  double frame_seconds = 0.0, front_end_seconds = 0.0;
-  int front_end_frames = 0;
+  double frame_seconds = 0.0;
 
   auto frame = [&](const ros::Time& stamp, const std::vector<slam::Measurement>& m) {
     const double t = secs(stamp);
@@ -222,32 +304,10 @@ int run(const Args& a) {
     progress.tick(frames, detail);
   };
 
-  // The pipeline's second stage input: a pair whose front end runs (or, with --serial, will run) elsewhere.
-  struct FrontEndResult {
-    std::vector<slam::Measurement> measurements;
-    double seconds = 0.0;
-  };
-  struct PendingPair {
-    ros::Time stamp;
-    std::future<FrontEndResult> result;
-  };
-  std::optional<PendingPair> pending;
-  // The front end's result of a pending pair, or nothing (the pair is counted as dropped) when it failed.
-  auto take = [&](PendingPair* p) -> std::optional<FrontEndResult> {
-    try {
-      FrontEndResult r = p->result.get();
-      front_end_seconds += r.seconds;
-      ++front_end_frames;
-      return r;
-    } catch (const std::exception& e) {
-      ++bad_frames;
-      std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(p->stamp), e.what());
-      return std::nullopt;
-    }
-  };
+  FrontEndPipeline front_end(fo, a.serial, frame);
 
   for (const rosbag::MessageInstance& mi : view) {
-    if (a.frames >= 0 && frames + (pending ? 1 : 0) >= a.frames) break;
+    if (a.frames >= 0 && frames + front_end.inFlight() >= a.frames) break;
     const std::string topic = topics.relative(mi.getTopic());
     if (topic == "ground_truth/pose") {
       truth.push_back(fromPoseMsg(*mi.instantiate<geometry_msgs::PoseStamped>()));
@@ -266,11 +326,7 @@ int run(const Args& a) {
     }
     // Process the complete pairs in stamp order once both camera_infos are known.
     sensor_msgs::Image::ConstPtr left, right;
-    while (!(a.frames >= 0 && frames + (pending ? 1 : 0) >= a.frames) && pairs_in.next(&left, &right)) {
-      if (!matcher) {
-        fo.disparity_offset = pairs_in.leftInfo().P(0, 2) - pairs_in.rightInfo().P(0, 2);
-        matcher = std::make_unique<stereo::StereoFeatureMatcher>(fo);
-      }
+    while (!(a.frames >= 0 && frames + front_end.inFlight() >= a.frames) && pairs_in.next(&left, &right)) {
       cv::Mat L, R;
       try {
         L = pairs_in.rectifyLeft(*left);
@@ -280,36 +336,11 @@ int run(const Args& a) {
         std::fprintf(stderr, "process_bag: image pair at t = %.6f s dropped: %s\n", secs(left->header.stamp), e.what());
         continue;
       }
-      // One front end at a time (it owns the matcher): the previous pair's result is taken before this one starts,
-      // then the SLAM processes the previous pair while this pair's front end runs.
-      std::optional<PendingPair> previous = std::move(pending);
-      pending.reset();
-      std::optional<FrontEndResult> previous_result;
-      if (previous) previous_result = take(&*previous);
-      auto work = [&matcher, L, R, li = pairs_in.leftInfo(), ri = pairs_in.rightInfo(), to]() {
-        const auto t0 = std::chrono::steady_clock::now();
-        const auto lms = stereo::triangulateMatches(li, ri, matcher->process(L, R), to);
-        FrontEndResult r;
-        for (const auto& l : lms) r.measurements.push_back({l.position, l.covariance, l.descriptor, l.strength});
-        r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        return r;
-      };
-      pending = PendingPair{left->header.stamp,
-                            std::async(a.serial ? std::launch::deferred : std::launch::async, work)};
-      if (previous_result) frame(previous->stamp, previous_result->measurements);
-      if (a.serial) {  // the deferred front end runs now, on this thread, and its frame right after it
-        previous = std::move(pending);
-        pending.reset();
-        previous_result = take(&*previous);
-        if (previous_result) frame(previous->stamp, previous_result->measurements);
-      }
+      front_end.submit(left->header.stamp, L, R, pairs_in.leftInfo(), pairs_in.rightInfo());
     }
   }
-  if (pending) {  // the last pair
-    const std::optional<FrontEndResult> r = take(&*pending);
-    if (r) frame(pending->stamp, r->measurements);
-    pending.reset();
-  }
+  front_end.finish();  // the last pair
+  bad_frames += front_end.dropped();
   progress.done();
   if (frames == 0)
     throw std::invalid_argument("no frame of '" + a.bag + "' could be processed (" + topics.summary() + "; " +
@@ -329,12 +360,12 @@ int run(const Args& a) {
               {"frames_dropped", std::to_string(bad_frames)},
               {"gyro", opt.use_gyro ? "true" : "false"},
               {"known_map", a.known_map.empty() ? "false" : "true"},
-              {"front_end", matcher ? a.features : "none (landmark bag)"},
+              {"front_end", front_end.started() ? a.features : "none (landmark bag)"},
               {"topics", topics.summary()},
               {"slam_ms_per_frame", std::to_string(1e3 * frame_seconds / frames)},
               {"front_end_ms_per_frame",
-               front_end_frames > 0 ? std::to_string(1e3 * front_end_seconds / front_end_frames) : "none"},
-              {"pipeline", !matcher ? "none (landmark bag)" : a.serial ? "serial (--serial)" : "front end || SLAM, 2 threads"},
+               front_end.started() ? std::to_string(1e3 * front_end.secondsPerPair()) : "none"},
+              {"pipeline", !front_end.started() ? "none (landmark bag)" : a.serial ? "serial (--serial)" : "front end || SLAM, 2 threads"},
               {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
   const std::string text = slam::writeResults(a.out, rec);
   common::writeParameters(a.out + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml", a.command_line,

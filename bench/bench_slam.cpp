@@ -14,6 +14,9 @@
  *   dense           the textbook dense reference predictDense() + updateDense() (O(n^3))
  * and, unless --quick, one extra row: fast_2threads and fast_1thread at K = 1000 with 200 observations per
  * frame (the globe experiments' max_updates_per_frame, config/slam_globe.yaml).
+ * Then gyro_interval/K:1000 (K:300 with --quick): the 10 gyro samples of one frame (100 Hz, bias estimated),
+ * fused one by one (predict + updateGyro each) and by Eskf::propagateWithGyro, side by side (Google
+ * Benchmark's own table; not in the summary).
  *
  * Set-up per K (seeded, identical for every variant): rig at the origin moving at 2 cm/s, K landmarks added
  * with addLandmark() from stereo-like measurements (points ~0.4 m in front of the camera, covariance
@@ -239,6 +242,50 @@ void runFrames(benchmark::State& st, int K, Variant v, int nobs) {
   st.counters["upd_ms"] = 1e3 * t_upd / it;
   st.counters["frames"] = it;
   st.counters["nis/dof"] = dof > 0 ? nis / static_cast<double>(dof) : 0.0;
+}
+
+// The gyro samples between two frames (issue 18): 10 samples at 100 Hz over the frame's 0.1 s, fused one by one
+// (predict + updateGyro each: 10 full-covariance updates) or by Eskf::propagateWithGyro (one landmark-block
+// update); same filter to rounding (test_eskf). Timed: the 0.1 s of prediction and the 10 gyro updates only.
+void runGyroInterval(benchmark::State& st, int K, bool batched) {
+  EskfOptions o = variantOptions(Variant::kFast2);
+  o.estimate_gyro_bias = true;
+  Eskf f(o);
+  {
+    const Scenario& sc = scenario(K, Variant::kFast2);  // same landmarks, on a 15-dim rig
+    f.setCapacity(sc.filter->capacity());
+    f.reset(sc.filter->state());
+    for (int j = 0; j < sc.filter->capacity(); ++j)
+      if (sc.filter->isActive(j)) f.addLandmark(j, sc.filter->predictObservation(j), sc.filter->landmarkCovariance(j));
+  }
+  std::mt19937_64 rng(11u + static_cast<unsigned>(K));
+  std::normal_distribution<double> g(0.0, 0.002);
+  const Eigen::Matrix3d C = Eigen::Matrix3d::Identity() * 0.002 * 0.002;
+  using Clock = std::chrono::steady_clock;
+  try {
+    for (auto _ : st) {
+      std::vector<Eskf::GyroStep> steps(10);
+      for (auto& s : steps) {
+        s.dt = kDt / 10;
+        s.z = f.state().w + f.state().gyro_bias + Eigen::Vector3d(g(rng), g(rng), g(rng));
+        s.C = C;
+      }
+      const auto t0 = Clock::now();
+      if (batched) {
+        f.propagateWithGyro(steps);
+      } else {
+        for (const auto& s : steps) {
+          f.predict(s.dt);
+          f.updateGyro(s.z, s.C);
+        }
+      }
+      st.SetIterationTime(std::chrono::duration<double>(Clock::now() - t0).count());
+    }
+  } catch (const std::exception& e) {
+    st.SkipWithError(e.what());
+    return;
+  }
+  st.counters["n"] = f.dim();
 }
 
 // ----------------------------------------------------------------------------- results and summary
@@ -479,6 +526,16 @@ int main(int argc, char** argv) {
     add(1000, 200, Variant::kFast1);
     add(1000, 200, Variant::kFast1Eigen);
   }
+  // The gyro between two frames, one by one against propagateWithGyro (printed by Google Benchmark's own table).
+  for (int K : {quick ? 300 : 1000})
+    for (bool batched : {false, true}) {
+      const std::string name = "gyro_interval/K:" + std::to_string(K) + "/10_samples/" +
+                               (batched ? "propagateWithGyro" : "one_by_one");
+      benchmark::RegisterBenchmark(name.c_str(), [K, batched](benchmark::State& st) { runGyroInterval(st, K, batched); })
+          ->UseManualTime()
+          ->Unit(benchmark::kMillisecond)
+          ->MinTime(0.5);
+    }
 
   const std::string load_before = loadAverage();
   std::unique_ptr<benchmark::BenchmarkReporter> reporter;

@@ -51,6 +51,9 @@
  *    EskfOptions::joseph_explicit_gain the expanded expression is evaluated term by term with an
  *    explicit K (twice the flops); both agree with the literal dense form to rounding.
  *  - The reset touches only the 3 angular rows/columns: O(n).
+ *  - propagateWithGyro(): the k gyro samples between two frames (predict + gyro update each) on rig-sized
+ *    matrices, then one symmetric rank-rigDim() downdate of the landmark block: O(rigDim n^2 / 2) instead of
+ *    k full updates O(k (3 n^2 / 2 + n^2 mirror)); same result to rounding (test_eskf, EskfGyroInterval).
  * Timings (bench_slam, with the dense reference side by side): docs/BENCHMARKS.md, "ES-EKF SLAM".
  * predictDense(), updateDense(), updateGyroDense() and updateKnownDense() are the textbook dense O(n^3) forms (full F,
  * full H, literal Joseph, full G) kept for tests and benchmarks only.

@@ -3,7 +3,8 @@
 """Pose consistency of SLAM runs: the normalised estimation error squared (NEES) of the pose, per frame, from
 process_bag results directories with ground truth, and over Monte Carlo runs its average against the chi^2 band.
 
-Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] RESULTS_DIR [RESULTS_DIR ...]
+Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] [--calibrated-frame]
+                    RESULTS_DIR [RESULTS_DIR ...]
 
 Each RESULTS_DIR holds trajectory.tum, ground_truth.tum (the bag's ground_truth/pose, in the SLAM's world:
 process_bag writes it) and rig_covariance.csv. Per frame k and run i the pose error is
@@ -11,6 +12,14 @@ e = [p_true - p_est, Log(R_true R_est^T)] (m, rad: the true state minus the esti
 R_true = Exp(dtheta) R_est; both parts must have that same sign),
 NEES_ik = e^T P^-1 e with P the 6x6 [p, theta] block of the rig covariance (6 dof). Frames whose P is singular
 (the first frame: its pose defines the world and is exactly known) are skipped.
+
+--calibrated-frame compares with the true poses of the frame the bag's calibration defines instead of the true
+optical frame. A calibration error moves every triangulated point by about the same rigid motion E (plus a scale
+and a small non-rigid remainder): no image can tell the frame E defines from the optical one, so a world fixed by
+the first camera frame is E's frame, and the poses the SLAM estimates are E T_true E^-1. make_dataset writes E
+(the least-squares fit over the working volume, from the true and the perturbed rig: ground truth, not the
+filter's output) as realism.calibration_error.measured_frame in BAG.truth.yaml, found from summary.yaml's 'bag'
+(as written, or relative to RESULTS_DIR's parent). The scale error stays in the comparison.
 
 Over N runs the average NEES of a frame, times N, is chi^2 with 6 N dof when the filter is consistent: the
 two-sided band at --confidence is [chi2((1-c)/2, 6N), chi2((1+c)/2, 6N)] / N (Bar-Shalom, Li, Kirubarajan 2001,
@@ -84,13 +93,46 @@ def read_covariances(path):
     return np.array(t), P
 
 
-def run_nees(d):
+def so3_exp(w):
+    a = float(np.linalg.norm(w))
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if a < 1e-12:
+        return np.eye(3) + K
+    return np.eye(3) + math.sin(a) / a * K + (1 - math.cos(a)) / (a * a) * K @ K
+
+
+def measured_frame(d):
+    """E = (R, t) of the frame the run's calibration defines, from the bag's truth.yaml (see --calibrated-frame)."""
+    import yaml
+    summary = os.path.join(d, "summary.yaml")
+    if not os.path.exists(summary):
+        raise ValueError("'%s' has no summary.yaml, so its bag is unknown (--calibrated-frame)" % d)
+    bag = (yaml.safe_load(open(summary)) or {}).get("bag", "")
+    stem = bag[:-4] if bag.endswith(".bag") else bag
+    tried = [stem + ".truth.yaml", os.path.join(os.path.dirname(os.path.abspath(d)), stem + ".truth.yaml")]
+    for path in tried:
+        if os.path.exists(path):
+            truth = yaml.safe_load(open(path)) or {}
+            f = ((truth.get("realism") or {}).get("calibration_error") or {}).get("measured_frame")
+            if f is None:
+                raise ValueError("'%s' has no realism.calibration_error.measured_frame (made by an older "
+                                 "make_dataset? make the bag again)" % path)
+            return so3_exp(np.array(f["rotation_rad"], float)), np.array(f["translation_m"], float)
+    raise ValueError("'%s': the truth of its bag '%s' is not at %s (--calibrated-frame)" % (d, bag, " or ".join(tried)))
+
+
+def run_nees(d, calibrated_frame=False):
     """Per-frame pose NEES of one results directory: dict t -> NEES (frames with a singular P left out)."""
     for f in ("trajectory.tum", "ground_truth.tum", "rig_covariance.csv"):
         if not os.path.exists(os.path.join(d, f)):
             raise ValueError("'%s' has no %s (process_bag on a bag with ground_truth/pose writes it)" % (d, f))
     te, pe, qe = read_tum(os.path.join(d, "trajectory.tum"))
     tg, pg, qg = read_tum(os.path.join(d, "ground_truth.tum"))
+    Rg = [rotation(q) for q in qg]
+    if calibrated_frame:  # T' = E T E^-1: R' = Re R Re^T, p' = Re p + te - R' te
+        Re, te_ = measured_frame(d)
+        Rg = [Re @ R @ Re.T for R in Rg]
+        pg = np.array([Re @ p + te_ - R @ te_ for p, R in zip(pg, Rg)])
     tc, P = read_covariances(os.path.join(d, "rig_covariance.csv"))
     out = {}
     for k, t in enumerate(te):
@@ -98,7 +140,7 @@ def run_nees(d):
         c = int(np.argmin(np.abs(tc - t)))
         if abs(tg[j] - t) > 1e-3 or abs(tc[c] - t) > 1e-6:
             continue
-        e = np.concatenate([pg[j] - pe[k], so3_log(rotation(qg[j]) @ rotation(qe[k]).T)])
+        e = np.concatenate([pg[j] - pe[k], so3_log(Rg[j] @ rotation(qe[k]).T)])
         Pk = 0.5 * (P[c] + P[c].T)
         w = np.linalg.eigvalsh(Pk)
         if w.min() <= 1e-12 * max(w.max(), 1e-300):
@@ -115,11 +157,13 @@ def main():
     ap.add_argument("--confidence", type=float, default=0.95)
     ap.add_argument("--min-inside", type=float, default=0.9)
     ap.add_argument("--plot", default="")
+    ap.add_argument("--calibrated-frame", action="store_true",
+                    help="compare with the true poses of the frame the bag's calibration defines (see above)")
     a = ap.parse_args()
     if not 0.5 < a.confidence < 1.0:
         sys.exit("slam_nees: --confidence must be in (0.5, 1)")
     try:
-        runs = [run_nees(d) for d in a.dirs]
+        runs = [run_nees(d, a.calibrated_frame) for d in a.dirs]
     except (ValueError, OSError) as e:
         print("slam_nees: %s" % e, file=sys.stderr)
         return 2

@@ -137,6 +137,16 @@ void emitRealism(YAML::Emitter& e, const sim::DatasetConfig& c, const sim::Pertu
   emitVec(e, p.principal_right);
   e << YAML::Key << "focal_scale_left" << YAML::Value << p.focal_scale_left;
   e << YAML::Key << "focal_scale_right" << YAML::Value << p.focal_scale_right;
+  // The frame this calibration defines (PerturbedCalibration::frame_*): slam_nees.py --calibrated-frame reads it.
+  e << YAML::Key << "measured_frame" << YAML::Value << YAML::BeginMap;
+  e << YAML::Key << "rotation_rad" << YAML::Value;
+  emitVec(e, p.frame_rotation);
+  e << YAML::Key << "translation_m" << YAML::Value;
+  emitVec(e, p.frame_translation);
+  e << YAML::Key << "scale" << YAML::Value << p.frame_scale;
+  e << YAML::Key << "residual_rms_mm" << YAML::Value << p.frame_residual_rms_m * 1e3;
+  e << YAML::Key << "points" << YAML::Value << p.frame_points;
+  e << YAML::EndMap;
   e << YAML::EndMap << YAML::EndMap;
 }
 

@@ -4,7 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <random>
 
+#include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
 #include "skin3d/sim/globe.h"
 
@@ -139,4 +142,55 @@ TEST(CalibrationError, ABoardThatCannotFitIsAnError) {
   p.min_distance_rel = 0.5;  // ...and nearer: it never fits both images
   p.max_distance_rel = 0.6;
   EXPECT_THROW(sim::perturbCalibration(trueRig(), p, 1, kWorkingDistance), std::runtime_error);
+}
+
+// The frame the calibration defines (PerturbedCalibration::frame_*). A baseline error alone scales every
+// triangulated point about the left centre, exactly: the fit must find that scale and no rotation or shift.
+TEST(CalibrationError, MeasuredFrameOfABaselineErrorIsItsScale) {
+  sim::CalibrationPerturbation p;
+  p.model = sim::CalibrationErrorModel::Independent;
+  p.baseline_rel = 0.003;
+  p.rotation = p.principal_point = p.focal_rel = 0.0;
+  const sim::PerturbedCalibration c = sim::perturbCalibration(trueRig(), p, 5, kWorkingDistance);
+  ASSERT_GT(std::abs(c.baseline_scale - 1.0), 1e-4);  // the seed drew a real error
+  EXPECT_NEAR(c.frame_scale, c.baseline_scale, 1e-9);
+  EXPECT_LT(c.frame_rotation.norm(), 1e-9);
+  EXPECT_LT(c.frame_translation.norm(), 1e-9);
+  EXPECT_LT(c.frame_residual_rms_m, 1e-9);
+  EXPECT_GT(c.frame_points, 100);
+}
+
+// A chessboard calibration's error is mostly rigid: the similarity explains most of the displacement of points
+// the fit never saw (random points of the working volume, drawn here), and the rest is the reported residual.
+TEST(CalibrationError, MeasuredFrameExplainsMostOfAChessboardCalibrationsError) {
+  const geometry::StereoRig truth = trueRig();
+  sim::CalibrationPerturbation p;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.15, 0.85), d(0.85, 1.15);
+  for (int seed : {1, 2, 3}) {
+    const sim::PerturbedCalibration c = sim::perturbCalibration(truth, p, seed, kWorkingDistance);
+    const Eigen::Matrix3d sR = c.frame_scale * geometry::so3Exp(c.frame_rotation);
+    double raw = 0.0, left = 0.0;
+    int n = 0;
+    while (n < 200) {
+      const Eigen::Vector2d uv(u(rng) * truth.left().width(), u(rng) * truth.left().height());
+      const Eigen::Vector3d X = d(rng) * kWorkingDistance * truth.left().unproject(uv);
+      Eigen::Vector2d ul, ur;
+      if (!truth.project(X, &ul, &ur) || !truth.right().inImage(ur)) continue;
+      const geometry::TriangulationResult t = c.rig.triangulate(ul, ur, 0.5);
+      ASSERT_TRUE(t.ok) << t.message;
+      raw += (t.X - X).squaredNorm();
+      left += (t.X - (sR * X + c.frame_translation)).squaredNorm();
+      ++n;
+    }
+    raw = std::sqrt(raw / n);
+    left = std::sqrt(left / n);
+    std::printf("seed %d: displacement RMS %.3f mm, after the similarity %.3f mm (fit residual %.3f mm), rotation "
+                "%.2f mrad, scale - 1 = %.1e\n",
+                seed, 1e3 * raw, 1e3 * left, 1e3 * c.frame_residual_rms_m, 1e3 * c.frame_rotation.norm(),
+                c.frame_scale - 1.0);
+    EXPECT_LT(left, 0.5 * raw) << seed;
+    EXPECT_LT(left, 2.0 * c.frame_residual_rms_m) << seed;
+    EXPECT_GT(c.frame_rotation.norm(), 1e-4) << seed;  // 0.1 mrad: a chessboard calibration is never that good
+  }
 }

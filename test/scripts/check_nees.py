@@ -8,7 +8,8 @@ usage: check_nees.py [--xunit FILE.xml]
 attitude strongly coupled, as on an orbit), and an estimate whose error true - estimate is drawn from that
 covariance (seeded). A consistent filter must be judged consistent; the same errors with the attitude part's
 sign flipped (the sign mistake the first version of slam_nees.py made), and a covariance 4x too small, must not;
-a directory without ground truth is a clear error (exit 2).
+a directory without ground truth is a clear error (exit 2). Runs made in the frame of a miscalibrated rig are
+consistent with --calibrated-frame and not without it.
 """
 import argparse
 import math
@@ -38,8 +39,17 @@ def quat(R):
     return np.array([(R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w), w])
 
 
-def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0):
+def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0, frame=None):
+    """frame = (Re, te): the filter ran in the frame a calibration defines; the ground truth is written in the
+    optical frame (T = E^-1 T' E) and the frame into BAG.truth.yaml beside d, as make_dataset writes it."""
     os.makedirs(d)
+    if frame is not None:
+        bag = d + ".bag"
+        open(d + "/summary.yaml", "w").write("bag: %s\n" % os.path.basename(bag))
+        w = so3_log_np(frame[0])
+        open(d + ".truth.yaml", "w").write(
+            "realism:\n  calibration_error:\n    measured_frame:\n      rotation_rad: [%r, %r, %r]\n"
+            "      translation_m: [%r, %r, %r]\n      scale: 1.0\n" % (tuple(w) + tuple(frame[1])))
     head = "# skin3d trajectory: t x y z qx qy qz qw\n"
     names = ["P_%d_%d" % (i, j) for i in range(12) for j in range(12)]
     with open(d + "/trajectory.tum", "w") as fe, open(d + "/ground_truth.tum", "w") as fg, \
@@ -62,6 +72,9 @@ def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0):
             e = np.linalg.cholesky(P) @ rng.standard_normal(6)  # true - estimate
             pe = p - e[:3]
             Re = exp_so3(-angle_sign * e[3:]) @ R  # R_true = Exp(dtheta) R_est
+            if frame is not None:  # the optical frame's truth: R = Re^T R' Re, p = Re^T (p' + R' te - te)
+                Rf, tf = frame
+                p, R = Rf.T @ (p + R @ tf - tf), Rf.T @ R @ Rf
             fg.write("%.9f %s %s\n" % (t, " ".join("%.12g" % v for v in p), " ".join("%.12g" % v for v in quat(R))))
             fe.write("%.9f %s %s\n" % (t, " ".join("%.12g" % v for v in pe), " ".join("%.12g" % v for v in quat(Re))))
             full = np.zeros((12, 12))
@@ -70,8 +83,15 @@ def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0):
             fc.write("%.9f," % t + ",".join("%.17g" % v for v in full.ravel()) + "\n")
 
 
-def run_script(dirs):
-    r = subprocess.run([sys.executable, SCRIPT] + dirs, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+def so3_log_np(R):
+    c = max(-1.0, min(1.0, 0.5 * (np.trace(R) - 1.0)))
+    a = math.acos(c)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return 0.5 * v if a < 1e-9 else a / (2.0 * math.sin(a)) * v
+
+
+def run_script(dirs, extra=()):
+    r = subprocess.run([sys.executable, SCRIPT] + list(extra) + dirs, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                        universal_newlines=True)
     return r.returncode, r.stdout
 
@@ -101,6 +121,25 @@ def checks(tmp):
             ok = rc == 1 and share < 50.0
         results.append((name, "" if ok else "exit %d, %.1f %% inside:\n%s" % (rc, share, text)))
         print("check_nees: %s: exit %d, %.1f %% of frames inside" % (name, rc, share))
+    # A run in the frame of a calibration 10 mrad and 1 mm off the optical one: consistent there, so consistent
+    # with --calibrated-frame and not without it; a missing truth.yaml is a clear error.
+    E = (exp_so3(np.array([0.006, -0.008, 0.002])), np.array([0.0004, -0.0003, 0.0009]))
+    dirs = []
+    for i in range(20):
+        d = os.path.join(tmp, "calibrated_%02d" % i)
+        write_run(d, rng, 60, frame=E)
+        dirs.append(d)
+    rc_f, text_f = run_script(dirs, ["--calibrated-frame"])
+    rc_o, text_o = run_script(dirs)
+    ok = rc_f == 0 and inside_share(text_f) >= 90.0 and rc_o == 1
+    results.append(("calibrated_frame", "" if ok else "with: exit %d\n%s\nwithout: exit %d\n%s"
+                    % (rc_f, text_f, rc_o, text_o)))
+    print("check_nees: calibrated_frame: %.1f %% inside with --calibrated-frame, %.1f %% without"
+          % (inside_share(text_f), inside_share(text_o)))
+    os.remove(dirs[0] + ".truth.yaml")
+    rc, text = run_script(dirs, ["--calibrated-frame"])
+    ok = rc == 2 and "truth" in text and "calibrated_00" in text
+    results.append(("calibrated_frame_without_truth", "" if ok else "exit %d: %s" % (rc, text)))
     bad = os.path.join(tmp, "no_truth")
     os.makedirs(bad)
     open(bad + "/trajectory.tum", "w").write("1000 0 0 0 0 0 0 1\n")

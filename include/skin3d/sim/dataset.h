@@ -89,6 +89,18 @@ struct PerturbedCalibration {
   /** The largest such error over a 9 x 9 grid of the left image (points at the working distance the right camera
    *  sees too), m. */
   double depth_error_max_m = 0.0;
+  /** The similarity that best maps true CCS points to the points this calibration triangulates from their true
+   *  pixels, X_measured ~ frame_scale Exp(frame_rotation) X + frame_translation (least squares, Umeyama, over the
+   *  working volume: a 9 x 9 grid of the left image at 0.8, 0.9, ..., 1.2 x the working distance, points both
+   *  cameras see). Its rigid part is the frame the calibration defines: no image can tell it from the true
+   *  optical frame, so a SLAM world fixed by the first camera frame is this frame, and the poses the SLAM
+   *  estimates are E T_true E^-1 with E = (Exp(frame_rotation), frame_translation) (scripts/slam_nees.py
+   *  --calibrated-frame). The scale is a metric error, not a frame: it is reported, not folded in. */
+  Eigen::Vector3d frame_rotation = Eigen::Vector3d::Zero();     //!< rad, rotation vector
+  Eigen::Vector3d frame_translation = Eigen::Vector3d::Zero();  //!< m
+  double frame_scale = 1.0;
+  double frame_residual_rms_m = 0.0;  //!< RMS of what the similarity does not explain (m): the non-rigid part
+  int frame_points = 0;               //!< grid points the fit used
   // Chessboard model only
   double calibration_rms_px = 0.0;    //!< the simulated calibration's RMS reprojection error
   double board_square_m = 0.0;

@@ -4,6 +4,9 @@
 #include <cmath>
 #include <random>
 #include <stdexcept>
+#include <vector>
+
+#include <Eigen/Geometry>
 
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/sim/dataset.h"
@@ -120,6 +123,39 @@ geometry::StereoRig chessboardCalibration(const geometry::StereoRig& truth, cons
   return m;
 }
 
+// The similarity X_measured ~ s R X + t over the working volume (PerturbedCalibration::frame_*).
+void fitMeasuredFrame(const geometry::StereoRig& truth, double working_distance, PerturbedCalibration* out) {
+  const geometry::PinholeCamera& L = truth.left();
+  std::vector<Eigen::Vector3d> src, dst;
+  for (int k = 0; k <= 4; ++k)
+    for (int i = 0; i <= 8; ++i)
+      for (int j = 0; j <= 8; ++j) {
+        const Eigen::Vector2d uv(L.width() * (0.5 + i) / 9.0, L.height() * (0.5 + j) / 9.0);
+        const Eigen::Vector3d X = (0.8 + 0.1 * k) * working_distance * L.unproject(uv);
+        Eigen::Vector2d ul, ur;
+        if (!truth.project(X, &ul, &ur) || !truth.right().inImage(ur)) continue;
+        const geometry::TriangulationResult t = out->rig.triangulate(ul, ur, 0.5);
+        if (!t.ok) continue;
+        src.push_back(X);
+        dst.push_back(t.X);
+      }
+  out->frame_points = static_cast<int>(src.size());
+  if (src.size() < 3) return;
+  Eigen::Matrix3Xd A(3, src.size()), B(3, dst.size());
+  for (size_t i = 0; i < src.size(); ++i) {
+    A.col(i) = src[i];
+    B.col(i) = dst[i];
+  }
+  const Eigen::Matrix4d T = Eigen::umeyama(A, B, true);
+  const Eigen::Matrix3d sR = T.topLeftCorner<3, 3>();
+  out->frame_scale = std::cbrt(sR.determinant());
+  out->frame_rotation = geometry::so3Log(sR / out->frame_scale);
+  out->frame_translation = T.topRightCorner<3, 1>();
+  double ss = 0.0;
+  for (size_t i = 0; i < src.size(); ++i) ss += (sR * src[i] + out->frame_translation - dst[i]).squaredNorm();
+  out->frame_residual_rms_m = std::sqrt(ss / static_cast<double>(src.size()));
+}
+
 }  // namespace
 
 PerturbedCalibration perturbCalibration(const geometry::StereoRig& truth, const CalibrationPerturbation& p,
@@ -145,6 +181,7 @@ PerturbedCalibration perturbCalibration(const geometry::StereoRig& truth, const 
       if (i == 4 && j == 4) out.depth_error_m = e;
       if (std::abs(e) > std::abs(out.depth_error_max_m)) out.depth_error_max_m = e;
     }
+  fitMeasuredFrame(truth, working_distance, &out);
   return out;
 }
 

@@ -80,7 +80,8 @@ const char* kUsage =
     "                   [--input auto|images|landmarks] [--ate-align auto|none|first_pose|se3] [--quiet]\n"
     "  --bag        dataset or recorded session (stereo/landmarks, or stereo/*/image_raw + camera_info)\n"
     "  --out        results directory (created)\n"
-    "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win)\n"
+    "  --config     SLAM parameters over the defaults of config/slam.yaml (repeatable: later files win); image\n"
+    "               input first applies config/slam_frontend.yaml's (the front end's measurement model)\n"
     "  --gyro       fuse imu/data (thesis experiment 3); same as --set use_gyro=true\n"
     "  --known-map  make_dataset's FILE.map.csv (landmarks + descriptors): localisation with a known map (exp. 1)\n"
     "  --features   front end for image bags: akaze (default, as the rig's launch files), kaze or orb; akaze and orb\n"
@@ -121,14 +122,13 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   return p;
 }
 
-/** The SLAM options of a run: config/slam.yaml's defaults, the front end's association distance (image input
- *  only: a landmark bag's descriptors are the recorded ones), --config files, --gyro, --set, validated. */
+/** The SLAM options of a run: config/slam.yaml's defaults, then for image input the front end's measurement model
+ *  and association distance (slam::imageInputOptions, = config/slam_frontend.yaml; a landmark bag's measurements
+ *  and descriptors are the recorded ones), --config files, --gyro, --set (the user's wins), validated. */
 slam::SlamOptions slamOptionsOf(const Args& a, bool use_images) {
   slam::SlamOptions opt;
-  // Binary descriptors (AKAZE, ORB: one float 0/1 per bit, L2 = sqrt(Hamming)) need a wider association
-  // distance than KAZE's unit-norm floats (config/slam.yaml's 0.3 accepts only identical bit strings):
-  // Hamming <= 30, as launch/rig.launch and replay_globe.launch set it; a config file or --set still wins.
-  if (use_images && a.features != "kaze") slam::setSlamOption(&opt, "max_descriptor_distance", "5.5");
+  if (use_images)
+    for (const auto& kv : slam::imageInputOptions(a.features)) slam::setSlamOption(&opt, kv.first, kv.second);
   for (const auto& c : a.configs) slam::applySlamOptions(&opt, c);
   if (a.gyro) opt.use_gyro = true;
   for (const auto& kv : a.sets) slam::setSlamOption(&opt, kv.first, kv.second);

@@ -107,6 +107,15 @@ void setSlamOption(SlamOptions* options, const std::string& key, const std::stri
 
 void applySlamOptions(SlamOptions* o, const std::string& yaml_path) { table().applyYaml(o, yaml_path); }
 
+std::vector<std::pair<std::string, std::string>> imageInputOptions(const std::string& features) {
+  std::vector<std::pair<std::string, std::string>> kv = {{"measurement_white_fraction", "0.1"},
+                                                         {"landmark_walk_x", "3.5e-5"},
+                                                         {"landmark_walk_y", "6.3e-5"},
+                                                         {"landmark_walk_z", "1.8e-4"}};
+  if (features != "kaze") kv.emplace_back("max_descriptor_distance", "5.5");
+  return kv;
+}
+
 SlamOptions loadSlamOptions(const std::string& yaml_path) {
   SlamOptions o;
   applySlamOptions(&o, yaml_path);

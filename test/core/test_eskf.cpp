@@ -496,9 +496,11 @@ namespace {
 
 // k gyro samples between two frames: propagateWithGyro() against the same steps one by one on the fast
 // filter (predict + updateGyro) and on the dense reference (predictDense + updateGyroDense).
-void runGyroInterval(unsigned seed, bool bias, int slots, int samples, const Eigen::Vector3d& walk) {
+void runGyroInterval(unsigned seed, bool bias, int slots, int samples, const Eigen::Vector3d& walk,
+                     double walk_reference_distance = 0.0) {
   EskfOptions opt = testOptions(bias);
   opt.landmark_walk = walk;
+  opt.landmark_walk_reference_distance = walk_reference_distance;
   std::mt19937 rng(seed);
   const Eskf start = makeFilter(rng, bias, slots, slots - 3, opt);  // 3 free slots stay free
   Eskf batch = start, seq = start, dense = start;
@@ -546,6 +548,7 @@ TEST(EskfGyroInterval, SameAsTheStepsOneByOneAndAsTheDenseForm) {
   runGyroInterval(32, true, 12, 10, Eigen::Vector3d::Zero());
   runGyroInterval(33, true, 12, 1, Eigen::Vector3d::Zero());
   runGyroInterval(34, true, 12, 25, Eigen::Vector3d(1e-3, 1e-3, 3e-3));  // landmark walk on
+  runGyroInterval(37, true, 12, 10, Eigen::Vector3d(1e-3, 1e-3, 3e-3), 0.45);  // per-landmark walk
   runGyroInterval(35, true, 140, 10, Eigen::Vector3d::Zero());           // n >= 384: two threads
   runGyroInterval(36, false, 12, 0, Eigen::Vector3d::Zero());            // no sample: nothing changes
 }
@@ -797,6 +800,55 @@ TEST(EskfApi, PredictLeavesLandmarkBlocksUntouched) {
   EXPECT_EQ(Mat(f.covariance().bottomRightCorner(f.dim() - rd, f.dim() - rd)),
             Mat(C0.bottomRightCorner(f.dim() - rd, f.dim() - rd)));
   EXPECT_EQ(f.covariance(), Mat(f.covariance().transpose()));
+}
+
+// With a reference distance, a landmark's walk is (|z| / reference)^4 times the common one, z its latest
+// measurement: set when it is added, renewed by every update that observes it (fast and dense alike).
+TEST(EskfApi, LandmarkWalkScalesWithTheSquareOfTheLandmarksDistance) {
+  EskfOptions opt = testOptions(false);
+  opt.landmark_walk = Eigen::Vector3d(1e-3, 2e-3, 5e-3);
+  opt.landmark_walk_reference_distance = 0.45;
+  Eskf f(opt);
+  f.setCapacity(3);
+  RigState x0;
+  x0.q = skin3d::geometry::Quat(Eigen::AngleAxisd(0.3, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()));
+  x0.p = Eigen::Vector3d(0.01, -0.02, 0.03);
+  f.reset(x0);
+  const Eigen::Vector3d z0(0.0, 0.0, 0.3), z1(0.1, -0.2, 0.55);
+  const Eigen::Matrix3d Cz = Eigen::Vector3d(1e-8, 1e-8, 1e-7).asDiagonal();
+  f.addLandmark(0, z0, Cz);
+  f.addLandmark(1, z1, Cz);
+  const auto expected = [](const Eigen::Vector3d& z) { return std::pow(z.norm() / 0.45, 4); };
+  EXPECT_NEAR(f.landmarkWalkScale(0), expected(z0), 1e-12);
+  EXPECT_NEAR(f.landmarkWalkScale(1), expected(z1), 1e-12);
+  EXPECT_THROW(f.landmarkWalkScale(2), std::invalid_argument);  // free slot
+  const double dt = 0.1;
+  const Mat C0 = f.covariance();
+  const Eigen::Matrix3d Q = f.landmarkProcessNoise(dt);
+  Eskf g = f;
+  f.predict(dt);
+  g.predictDense(dt);
+  expectSameFilter(f, g, 1e-12, "scaled walk");
+  for (int j : {0, 1}) {
+    const Mat d = f.covariance().block<3, 3>(f.slotIndex(j), f.slotIndex(j)) - C0.block<3, 3>(f.slotIndex(j), f.slotIndex(j));
+    EXPECT_LT((d - expected(j == 0 ? z0 : z1) * Q).norm(), 1e-15 + 1e-12 * Q.norm()) << "slot " << j;
+  }
+  // An observation of slot 0 from 0.9 m: its walk becomes 16x the reference's; slot 1 keeps its own.
+  const Eigen::Vector3d z0b = Eigen::Vector3d(0.2, 0.1, 0.87).normalized() * 0.9;
+  Eskf h = f;
+  f.update({Eskf::Observation{0, z0b, Cz}});
+  h.updateDense({Eskf::Observation{0, z0b, Cz}});
+  EXPECT_NEAR(f.landmarkWalkScale(0), 16.0, 1e-9);
+  EXPECT_NEAR(h.landmarkWalkScale(0), 16.0, 1e-9);
+  EXPECT_NEAR(f.landmarkWalkScale(1), expected(z1), 1e-12);
+  f.predict(dt);
+  h.predictDense(dt);
+  expectSameFilter(f, h, 1e-10, "scaled walk after an update");
+  // The reference distance must be finite and >= 0.
+  for (double bad : {-0.1, std::nan("")}) {
+    opt.landmark_walk_reference_distance = bad;
+    EXPECT_THROW(Eskf{opt}, std::invalid_argument) << bad;
+  }
 }
 
 TEST(EskfApi, LandmarkWalkAddsItsProcessNoiseToEachActiveLandmark) {

@@ -18,7 +18,8 @@
  * System model over a step dt (s):
  *   p+ = p + R v dt,  q+ = q (x) Exp(w dt),  v+ = gamma v + w1,  w+ = lambda w + w2,  b+ = b + w3,  m+ = m,
  *   w1 ~ N(0, velocity_noise^2 dt I), w2 ~ N(0, angular_rate_noise^2 dt I), w3 ~ N(0, gyro_bias_walk^2 dt I),
- *   and optionally a landmark random walk m+ = m + w4, w4 ~ N(0, R diag(landmark_walk^2 dt) R^T) (default off).
+ *   and optionally a landmark random walk m+ = m + w4, w4 ~ N(0, s_j R diag(landmark_walk^2 dt) R^T) (default off;
+ *   s_j = 1, or (|z_j| / reference distance)^4 with z_j the landmark's latest measurement).
  * Exact first-order error dynamics (verified numerically in test_eskf):
  *   dp+ = dp - [R v dt]x dtheta + R dt dv,   dtheta+ = dtheta + R Jl(w dt) dt dw,
  *   dv+ = gamma dv + w1,  dw+ = lambda dw + w2,  db+ = db + w3,  dm+ = dm.
@@ -110,6 +111,11 @@ struct EskfOptions {
    *  keeps most of its error from one frame to the next) as a slowly moving landmark, so the filter does
    *  not average them as if they were white. Default 0 (off): landmark-level simulations have white noise. */
   Eigen::Vector3d landmark_walk = Eigen::Vector3d::Zero();
+  /** m; > 0: each landmark's walk scales as a stereo depth error does, with the square of its distance: its
+   *  Q_m is multiplied by (|z| / landmark_walk_reference_distance)^4, z its latest measurement (m, CCS: set by
+   *  addLandmark() and by every update() that observes it), so landmark_walk is the walk of a landmark seen
+   *  at this distance. 0 (default): the same walk for every landmark. */
+  double landmark_walk_reference_distance = 0.0;
   /** The default update's symmetric downdate C - U U^T through OpenBLAS (dsyrk/dgemm, kernels for the CPU
    *  chosen at run time) when the library was built with it (Eskf::blasAvailable()); false: Eigen's product
    *  (SSE2 in Debian's build). Same result to rounding; the benchmark compares the two. Default true. */
@@ -275,8 +281,12 @@ class Eskf {
   Eigen::MatrixXd transitionJacobian(double dt) const;
   /** @brief Process noise Q of the rig block over dt. */
   Eigen::MatrixXd processNoise(double dt) const;
-  /** @brief Process noise of one active landmark over dt: R diag(landmark_walk^2 dt) R^T (m^2; zero when off). */
+  /** @brief Process noise of one active landmark over dt: R diag(landmark_walk^2 dt) R^T (m^2; zero when off),
+   *  before the landmark's own factor landmarkWalkScale(). */
   Eigen::Matrix3d landmarkProcessNoise(double dt) const;
+  /** @brief The factor of an active slot's walk: (|z| / landmark_walk_reference_distance)^4 with z its latest
+   *  measurement, or 1 when the reference distance is 0. @throws std::invalid_argument if it is not active. */
+  double landmarkWalkScale(int slot) const;
   /** @brief Dense 3 x dim() measurement Jacobian of an observation of an active slot. */
   Eigen::MatrixXd measurementJacobian(const Observation& observation) const;
   /** @brief Non-zero blocks of it: pose (3x6, w.r.t. [dp, dtheta]) and landmark (3x3). */
@@ -327,6 +337,8 @@ class Eskf {
   RigState x_;
   std::vector<Eigen::Vector3d> lm_;
   std::vector<unsigned char> active_;
+  std::vector<double> walk_scale_;  // per slot: landmarkWalkScale()
+  double walkScaleOf(const Eigen::Vector3d& z) const;
   int active_count_ = 0;
   Eigen::MatrixXd C_;
 };

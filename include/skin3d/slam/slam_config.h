@@ -33,8 +33,8 @@ void setSlamOption(SlamOptions* options, const std::string& key, const std::stri
  *  - the front end's measurement model: its errors are correlated over frames (a feature keeps most of its
  *    localisation error, and the calibration's small non-rigid error, from one frame to the next), so only
  *    measurement_white_fraction = 0.1 of each covariance is white and the rest is the landmark random walk
- *    landmark_walk_{x,y,z} (m per sqrt(s) along the camera's axes); values from the front end's tracks on two
- *    exact-calibration renders (seeds 1, 2; see config/slam_frontend.yaml);
+ *    landmark_walk_{x,y,z} (m per sqrt(s) along the camera's axes, the same for every landmark); values from
+ *    the front end's tracks on two exact-calibration renders (seeds 1, 2; see config/slam_frontend.yaml);
  *  - for binary descriptors (features other than "kaze": AKAZE, ORB, one float 0/1 per bit, L2 = sqrt(Hamming)),
  *    max_descriptor_distance 5.5 (Hamming <= 30): slam.yaml's 0.3 is for KAZE's unit-norm floats.
  *  Returns (key, value) pairs in the order to apply them; config files and --set given by the user win. */

@@ -219,6 +219,7 @@ void EskfOptions::validate() const {
   if (!landmark_walk.allFinite() || (landmark_walk.array() < 0.0).any())
     fail("EskfOptions: landmark_walk = (" + str(landmark_walk.x()) + ", " + str(landmark_walk.y()) + ", " +
          str(landmark_walk.z()) + ") must be finite and >= 0");
+  nonneg("landmark_walk_reference_distance", landmark_walk_reference_distance);
   if (threads < 1) fail("EskfOptions: threads = " + std::to_string(threads) + " must be >= 1");
 }
 
@@ -330,6 +331,7 @@ void Eskf::reset(const RigState& initial, const Eigen::MatrixXd& P) {
   C_.topLeftCorner(rd_, rd_) = Ps;
   std::fill(lm_.begin(), lm_.end(), Eigen::Vector3d::Zero());
   std::fill(active_.begin(), active_.end(), 0);
+  std::fill(walk_scale_.begin(), walk_scale_.end(), 1.0);
   active_count_ = 0;
 }
 
@@ -354,6 +356,7 @@ void Eskf::setCapacity(int slots) {
   C_.swap(C);
   lm_.resize(slots, Eigen::Vector3d::Zero());
   active_.resize(slots, 0);
+  walk_scale_.resize(slots, 1.0);
 }
 
 // ============================================================================ landmarks
@@ -376,6 +379,7 @@ void Eskf::addLandmark(int slot, const Eigen::Vector3d& z, const Eigen::Matrix3d
   C_.middleRows<3>(s) = Cxm.transpose();
   C_.block<3, 3>(s, s) = Cmm;
   lm_[slot] = x_.p + R * z;
+  walk_scale_[slot] = walkScaleOf(z);
   active_[slot] = 1;
   ++active_count_;
 }
@@ -387,6 +391,7 @@ void Eskf::removeLandmark(int slot) {
   C_.middleCols<3>(s).setZero();
   C_.middleRows<3>(s).setZero();
   lm_[slot].setZero();
+  walk_scale_[slot] = 1.0;
   active_[slot] = 0;
   --active_count_;
 }
@@ -437,12 +442,24 @@ Eigen::Matrix3d Eskf::landmarkProcessNoiseAt(const RigState& x, double dt) const
   return R * Eigen::Vector3d(opt_.landmark_walk.array().square() * dt).asDiagonal() * R.transpose();
 }
 
+double Eskf::walkScaleOf(const Eigen::Vector3d& z) const {
+  if (!(opt_.landmark_walk_reference_distance > 0.0)) return 1.0;
+  const double r = z.norm() / opt_.landmark_walk_reference_distance;
+  return (r * r) * (r * r);
+}
+
+double Eskf::landmarkWalkScale(int slot) const {
+  checkSlot(slot, "Eskf::landmarkWalkScale");
+  if (!active_[slot]) fail("Eskf::landmarkWalkScale: slot " + std::to_string(slot) + " is not active");
+  return walk_scale_[slot];
+}
+
 void Eskf::addLandmarkProcessNoise(double dt) {
   if ((opt_.landmark_walk.array() == 0.0).all()) return;
   Eigen::Matrix3d Q = landmarkProcessNoise(dt);
   Q = 0.5 * (Q + Q.transpose());
   for (int j = 0; j < capacity(); ++j)
-    if (active_[j]) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += Q;
+    if (active_[j]) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += walk_scale_[j] * Q;
 }
 
 void Eskf::measurementJacobianBlocks(int slot, Eigen::Matrix<double, 3, 6>* pose, Eigen::Matrix3d* landmark) const {
@@ -528,7 +545,7 @@ void Eskf::predictDense(double dt) {
   if (!(opt_.landmark_walk.array() == 0.0).all()) {  // the full Q: rig block and every active landmark's block
     const Eigen::Matrix3d Qm = landmarkProcessNoise(dt);
     for (int j = 0; j < capacity(); ++j)
-      if (active_[j]) C.block<3, 3>(slotIndex(j), slotIndex(j)) += Qm;
+      if (active_[j]) C.block<3, 3>(slotIndex(j), slotIndex(j)) += walk_scale_[j] * Qm;
   }
   C_ = 0.5 * (C + C.transpose());
   x_ = propagateNominal(x_, dt, opt_.gamma, opt_.lambda);
@@ -701,7 +718,9 @@ Eskf::UpdateResult Eskf::update(const std::vector<Observation>& observations) {
   std::vector<BlockRow> rows;
   Eigen::VectorXd y;
   buildObservationRows(observations, &rows, &y);
-  return sparseUpdate(rows, y);
+  const UpdateResult res = sparseUpdate(rows, y);
+  for (const Observation& o : observations) walk_scale_[o.slot] = walkScaleOf(o.z);
+  return res;
 }
 
 Eskf::UpdateResult Eskf::updateDense(const std::vector<Observation>& observations) {
@@ -710,7 +729,9 @@ Eskf::UpdateResult Eskf::updateDense(const std::vector<Observation>& observation
   std::vector<BlockRow> rows;
   Eigen::VectorXd y;
   buildObservationRows(observations, &rows, &y);
-  return denseUpdate(rows, y);
+  const UpdateResult res = denseUpdate(rows, y);
+  for (const Observation& o : observations) walk_scale_[o.slot] = walkScaleOf(o.z);
+  return res;
 }
 
 Eskf::UpdateResult Eskf::updateGyro(const Eigen::Vector3d& z, const Eigen::Matrix3d& C) {
@@ -791,7 +812,7 @@ Eskf::UpdateResult Eskf::propagateWithGyro(const std::vector<GyroStep>& steps) {
     for (int j = 0; j < capacity(); ++j)
       if (active_[j]) {
         lm_[j] += dm.segment<3>(3 * j);
-        if (walk) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += 0.5 * (Qm + Qm.transpose());
+        if (walk) C_.block<3, 3>(slotIndex(j), slotIndex(j)) += walk_scale_[j] * 0.5 * (Qm + Qm.transpose());
       }
   } else {
     C_ = P;

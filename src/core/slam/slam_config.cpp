@@ -69,6 +69,7 @@ const Table& table() {
       SKIN3D_DOUBLE("landmark_walk_x", filter.landmark_walk.x()),
       SKIN3D_DOUBLE("landmark_walk_y", filter.landmark_walk.y()),
       SKIN3D_DOUBLE("landmark_walk_z", filter.landmark_walk.z()),
+      SKIN3D_DOUBLE("landmark_walk_reference_distance", filter.landmark_walk_reference_distance),
       SKIN3D_INT("threads", filter.threads),
       SKIN3D_BOOL("blas_downdate", filter.blas_downdate),
       SKIN3D_INT("pool_initial_capacity", pool.initial_capacity),

@@ -3,7 +3,7 @@
 """Pose consistency of SLAM runs: the normalised estimation error squared (NEES) of the pose, per frame, from
 process_bag results directories with ground truth, and over Monte Carlo runs its average against the chi^2 band.
 
-Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] [--calibrated-frame]
+Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] [--calibrated-frame] [--landmarks]
                     RESULTS_DIR [RESULTS_DIR ...]
 
 Each RESULTS_DIR holds trajectory.tum, ground_truth.tum (the bag's ground_truth/pose, in the SLAM's world:
@@ -20,6 +20,10 @@ the first camera frame is E's frame, and the poses the SLAM estimates are E T_tr
 (the least-squares fit over the working volume, from the true and the perturbed rig: ground truth, not the
 filter's output) as realism.calibration_error.measured_frame in BAG.truth.yaml, found from summary.yaml's 'bag'
 (as written, or relative to RESULTS_DIR's parent). The scale error stays in the comparison.
+
+--landmarks also prints the landmarks' radial NEES (1 dof) over the final maps of globe runs: the distance of each
+landmark from the true sphere against its covariance along the radius (map_covariance.csv; the tangential error has no
+truth). It does not change the exit code.
 
 Over N runs the average NEES of a frame, times N, is chi^2 with 6 N dof when the filter is consistent: the
 two-sided band at --confidence is [chi2((1-c)/2, 6N), chi2((1+c)/2, 6N)] / N (Bar-Shalom, Li, Kirubarajan 2001,
@@ -101,24 +105,57 @@ def so3_exp(w):
     return np.eye(3) + math.sin(a) / a * K + (1 - math.cos(a)) / (a * a) * K @ K
 
 
-def measured_frame(d):
-    """E = (R, t) of the frame the run's calibration defines, from the bag's truth.yaml (see --calibrated-frame)."""
+def bag_truth(d, why):
+    """The run's BAG.truth.yaml (path, dict), found from summary.yaml's 'bag'."""
     import yaml
     summary = os.path.join(d, "summary.yaml")
     if not os.path.exists(summary):
-        raise ValueError("'%s' has no summary.yaml, so its bag is unknown (--calibrated-frame)" % d)
+        raise ValueError("'%s' has no summary.yaml, so its bag is unknown (%s)" % (d, why))
     bag = (yaml.safe_load(open(summary)) or {}).get("bag", "")
     stem = bag[:-4] if bag.endswith(".bag") else bag
     tried = [stem + ".truth.yaml", os.path.join(os.path.dirname(os.path.abspath(d)), stem + ".truth.yaml")]
     for path in tried:
         if os.path.exists(path):
-            truth = yaml.safe_load(open(path)) or {}
-            f = ((truth.get("realism") or {}).get("calibration_error") or {}).get("measured_frame")
-            if f is None:
-                raise ValueError("'%s' has no realism.calibration_error.measured_frame (made by an older "
-                                 "make_dataset? make the bag again)" % path)
-            return so3_exp(np.array(f["rotation_rad"], float)), np.array(f["translation_m"], float)
-    raise ValueError("'%s': the truth of its bag '%s' is not at %s (--calibrated-frame)" % (d, bag, " or ".join(tried)))
+            return path, yaml.safe_load(open(path)) or {}
+    raise ValueError("'%s': the truth of its bag '%s' is not at %s (%s)" % (d, bag, " or ".join(tried), why))
+
+
+def measured_frame(d):
+    """E = (R, t) of the frame the run's calibration defines, from the bag's truth.yaml (see --calibrated-frame)."""
+    path, truth = bag_truth(d, "--calibrated-frame")
+    f = ((truth.get("realism") or {}).get("calibration_error") or {}).get("measured_frame")
+    if f is None:
+        raise ValueError("'%s' has no realism.calibration_error.measured_frame (made by an older "
+                         "make_dataset? make the bag again)" % path)
+    return so3_exp(np.array(f["rotation_rad"], float)), np.array(f["translation_m"], float)
+
+
+def landmark_nees(d, calibrated_frame=False):
+    """Radial NEES (1 dof) of the final map's landmarks of a globe run: e = |m - c| - r against the true sphere
+    (centre c moved into the calibrated frame with --calibrated-frame), variance n^T C n with n the radial
+    direction. The tangential error has no truth (a feature's true position on the sphere is not known)."""
+    path = os.path.join(d, "map_covariance.csv")
+    if not os.path.exists(path):
+        raise ValueError("'%s' has no map_covariance.csv (process_bag writes it since session 18)" % d)
+    tpath, truth = bag_truth(d, "--landmarks")
+    sphere = truth.get("sphere") or {}
+    if "centre_world_m" not in sphere:
+        raise ValueError("'%s' has no sphere.centre_world_m: --landmarks needs a globe dataset" % tpath)
+    c, r = np.array(sphere["centre_world_m"], float), float(sphere["radius_m"])
+    if calibrated_frame:
+        Re, te = measured_frame(d)
+        c = Re @ c + te
+    rows = [l.split(",") for l in open(path) if l.strip() and not l.startswith("#") and not l.startswith("id")]
+    out = []
+    for v in rows:
+        m = np.array([float(x) for x in v[1:4]])
+        cxx, cxy, cxz, cyy, cyz, czz = (float(x) for x in v[4:10])
+        C = np.array([[cxx, cxy, cxz], [cxy, cyy, cyz], [cxz, cyz, czz]])
+        n = (m - c) / np.linalg.norm(m - c)
+        var = float(n @ C @ n)
+        if var > 0:
+            out.append((np.linalg.norm(m - c) - r) ** 2 / var)
+    return np.array(out)
 
 
 def run_nees(d, calibrated_frame=False):
@@ -157,6 +194,8 @@ def main():
     ap.add_argument("--confidence", type=float, default=0.95)
     ap.add_argument("--min-inside", type=float, default=0.9)
     ap.add_argument("--plot", default="")
+    ap.add_argument("--landmarks", action="store_true",
+                    help="also the radial NEES (1 dof) of each run's final map against the true sphere (globe)")
     ap.add_argument("--calibrated-frame", action="store_true",
                     help="compare with the true poses of the frame the bag's calibration defines (see above)")
     a = ap.parse_args()
@@ -188,6 +227,16 @@ def main():
         v = np.array(list(r.values()))
         print("  %s: %d frames, mean NEES %.2f, beyond chi2(%.2f, 6) = %.1f: %.1f %% (expected %.0f %%)"
               % (d, len(v), v.mean(), a.confidence, single, 100 * np.mean(v > single), 100 * (1 - a.confidence)))
+    if a.landmarks:
+        try:
+            lm = np.concatenate([landmark_nees(d, a.calibrated_frame) for d in a.dirs])
+        except (ValueError, OSError, KeyError) as e:
+            print("slam_nees: %s" % e, file=sys.stderr)
+            return 2
+        q = normal_quantile(0.5 * (1 + a.confidence)) ** 2  # chi^2(1) quantile
+        print("landmarks (final maps, radial error against the true sphere, 1 dof): %d; mean NEES %.2f (expected 1), "
+              "median %.3f (expected 0.455); beyond chi2(%.2f, 1) = %.2f: %.1f %% (expected %.0f %%)"
+              % (len(lm), lm.mean(), np.median(lm), a.confidence, q, 100 * np.mean(lm > q), 100 * (1 - a.confidence)))
     if a.plot:
         import matplotlib
         matplotlib.use("Agg")

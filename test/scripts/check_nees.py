@@ -9,7 +9,8 @@ attitude strongly coupled, as on an orbit), and an estimate whose error true - e
 covariance (seeded). A consistent filter must be judged consistent; the same errors with the attitude part's
 sign flipped (the sign mistake the first version of slam_nees.py made), and a covariance 4x too small, must not;
 a directory without ground truth is a clear error (exit 2). Runs made in the frame of a miscalibrated rig are
-consistent with --calibrated-frame and not without it.
+consistent with --calibrated-frame and not without it. The landmarks' radial NEES (--landmarks) reads ~1 for
+errors drawn from their covariances and ~4 for covariances 4x too small.
 """
 import argparse
 import math
@@ -140,6 +141,35 @@ def checks(tmp):
     rc, text = run_script(dirs, ["--calibrated-frame"])
     ok = rc == 2 and "truth" in text and "calibrated_00" in text
     results.append(("calibrated_frame_without_truth", "" if ok else "exit %d: %s" % (rc, text)))
+    # Landmarks on the true sphere (in the calibrated frame) with errors drawn from their covariances: the radial
+    # NEES must average ~1; covariances 4x too small must read ~4.
+    for name, scale, lo, hi in (("landmarks_consistent", 1.0, 0.85, 1.15), ("landmarks_overconfident_4x", 0.25, 3.4, 4.6)):
+        dirs = []
+        for i in range(5):
+            d = os.path.join(tmp, "%s_%02d" % (name, i))
+            write_run(d, rng, 10, frame=E)
+            open(d + ".truth.yaml", "a").write("sphere:\n  centre_world_m: [0, 0, 0.6]\n  radius_m: 0.2\n")
+            c = E[0] @ np.array([0.0, 0.0, 0.6]) + E[1]
+            with open(d + "/map_covariance.csv", "w") as f:
+                f.write("# synthetic\nid,x,y,z,c_xx,c_xy,c_xz,c_yy,c_yz,c_zz,observations\n")
+                for j in range(300):
+                    n = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), -1.0])
+                    n /= np.linalg.norm(n)
+                    A = rng.standard_normal((3, 3)) * 1e-4
+                    C = A @ A.T + np.eye(3) * 1e-10
+                    m = c + 0.2 * n + np.linalg.cholesky(C) @ rng.standard_normal(3)
+                    Cw = scale * C
+                    f.write("%d,%r,%r,%r,%r,%r,%r,%r,%r,%r,5\n" % (j, m[0], m[1], m[2], Cw[0, 0], Cw[0, 1], Cw[0, 2],
+                                                                  Cw[1, 1], Cw[1, 2], Cw[2, 2]))
+            dirs.append(d)
+        rc, text = run_script(dirs, ["--calibrated-frame", "--landmarks"])
+        mean = -1.0
+        for line in text.splitlines():
+            if line.startswith("landmarks (final maps"):
+                mean = float(line.split("mean NEES ")[1].split()[0])
+        ok = lo <= mean <= hi
+        results.append((name, "" if ok else "mean %.2f not in [%.2f, %.2f]:\n%s" % (mean, lo, hi, text)))
+        print("check_nees: %s: landmark mean NEES %.2f" % (name, mean))
     bad = os.path.join(tmp, "no_truth")
     os.makedirs(bad)
     open(bad + "/trajectory.tum", "w").write("1000 0 0 0 0 0 0 1\n")

@@ -104,6 +104,9 @@ std::int64_t parseStampNs(const std::string& text);
  *  @throws std::runtime_error naming the file when it cannot be written. */
 void writeTum(const std::string& path, const std::vector<StampedPose>& trajectory);
 void writePly(const std::string& path, const std::vector<MapPoint>& map);
+/** @brief map_covariance.csv: per landmark id, position (m, world), the upper triangle of its covariance (m^2)
+ *  and its observation count (what slam_nees.py --landmarks reads). */
+void writeMapCovarianceCsv(const std::string& path, const std::vector<MapPoint>& map);
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows);
 /** @brief rig_covariance.csv: a '# variables:' comment naming the rig error-state variables, a header
  *  "t,P_0_0,P_0_1,...", then one row per frame: t and the rig covariance, row-major (SI: m, rad, s). */
@@ -128,7 +131,7 @@ struct RunRecord {
 };
 
 /**
- * @brief Writes the results directory (created if missing): trajectory.tum, map.ply, state.csv, rig_covariance.csv,
+ * @brief Writes the results directory (created if missing): trajectory.tum, map.ply, map_covariance.csv, state.csv, rig_covariance.csv,
  * ground_truth.tum (if any), sphere_fit.yaml (if fit_sphere and the fit succeeds) and summary.yaml
  * (frames, map size, final covariance traces, v_x-omega_y correlation, ATE, sphere fit; mm where the key says).
  * @return the summary text. @throws std::runtime_error naming the path when something cannot be written.

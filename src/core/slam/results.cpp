@@ -243,6 +243,20 @@ void writePly(const std::string& path, const std::vector<MapPoint>& map) {
   close(f, path);
 }
 
+void writeMapCovarianceCsv(const std::string& path, const std::vector<MapPoint>& map) {
+  auto f = open(path);
+  f << "# skin3d SLAM map: each landmark's position (m, world) and its 3x3 covariance (m^2, upper triangle)\n"
+    << "id,x,y,z,c_xx,c_xy,c_xz,c_yy,c_yz,c_zz,observations\n";
+  f.precision(17);
+  for (const auto& m : map) {
+    const Eigen::Matrix3d& C = m.covariance;
+    f << m.id << ',' << m.position.x() << ',' << m.position.y() << ',' << m.position.z() << ',' << C(0, 0) << ','
+      << C(0, 1) << ',' << C(0, 2) << ',' << C(1, 1) << ',' << C(1, 2) << ',' << C(2, 2) << ',' << m.times_observed
+      << '\n';
+  }
+  close(f, path);
+}
+
 void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows) {
   auto f = open(path);
   f << "t,vx,vy,vz,wx,wy,wz,trace_rig,trace_landmarks,trace_all,position_std_m,corr_vx_wy,pool_size,pool_in_use,"
@@ -306,6 +320,7 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
   if (::stat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) throw std::runtime_error("cannot create directory '" + dir + "'");
   writeTum(dir + "/trajectory.tum", run.trajectory);
   writePly(dir + "/map.ply", run.map);
+  writeMapCovarianceCsv(dir + "/map_covariance.csv", run.map);
   writeStateCsv(dir + "/state.csv", run.rows);
   writeRigCovarianceCsv(dir + "/rig_covariance.csv", run.rows);
   if (!run.ground_truth.empty()) writeTum(dir + "/ground_truth.tum", run.ground_truth);

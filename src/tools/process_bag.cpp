@@ -10,8 +10,9 @@
  * (stereo/{left,right}/image_raw + camera_info) through the front end (rectify, features, MMSE
  * triangulation) first; imu/data feeds the gyroscope with --gyro. Writes the results directory of
  * DESIGN.md: trajectory.tum, map.ply, sphere_fit.yaml (robust sphere fit of the map), state.csv (per-frame
- * filter state), rig_covariance.csv (per-frame rig covariance), summary.yaml (with the absolute trajectory
- * error when the bag has ground_truth/pose), ground_truth.tum, and parameters.yaml (the command line and every
+ * filter state), rig_covariance.csv (per-frame rig covariance), map_covariance.csv (each landmark's covariance),
+ * summary.yaml (with the absolute trajectory error when the bag has ground_truth/pose), ground_truth.tum, and
+ * parameters.yaml (the command line and every
  * parameter's effective value). Progress on stderr (every 2 s on a terminal, every 10 % in a log).
  *
  * --known-map MAP.csv: thesis experiment 1, the landmarks are known (make_dataset globe-landmarks writes

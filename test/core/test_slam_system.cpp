@@ -207,6 +207,40 @@ TEST(SlamSystem, WhiteFractionPlacesNewLandmarksWithTheWholeCovarianceAndUpdates
   }
 }
 
+// initial_gyro_bias (a bias measured while the rig stood still, scripts/gyro_bias.py) is the first state's bias, and
+// the gyro's samples are corrected by it: with it the angular rate follows the true rate, without it the rate plus the
+// bias. Without estimation it stays the bias throughout; with estimation it is the prior mean.
+TEST(SlamSystem, InitialGyroBiasIsTheFirstStatesBiasAndCorrectsTheGyro) {
+  const sim::GlobeSimulator sim(smallGlobe(7, 1));
+  const Eigen::Vector3d bias(0.01, -0.02, 0.005), rate(0.03, 0.1, -0.05);
+  for (bool estimate : {false, true}) {
+    slam::SlamOptions with = smallSlam(), without = smallSlam();
+    for (slam::SlamOptions* o : {&with, &without}) {
+      o->use_gyro = true;
+      o->gyro_noise = 1e-5;
+      o->filter.estimate_gyro_bias = estimate;
+      o->filter.initial_gyro_bias_std = 1e-4;
+    }
+    slam::setSlamOption(&with, "initial_gyro_bias_x", "0.01");
+    slam::setSlamOption(&with, "initial_gyro_bias_y", "-0.02");
+    slam::setSlamOption(&with, "initial_gyro_bias_z", "0.005");
+    ASSERT_EQ(with.filter.initial_gyro_bias, bias);
+    slam::SlamSystem a(with), b(without);
+    for (slam::SlamSystem* s : {&a, &b}) {
+      s->processFrame(0.0, toMeasurements(sim.measure(0)));
+      for (int i = 1; i <= 10; ++i) s->addGyro(0.01 * i, rate + bias);
+      s->processFrame(0.1, {});  // prediction and the gyro only
+    }
+    // estimated, the prior (std 1e-4) moves a little with the gyro's samples; without the option it would be 0
+    EXPECT_LT((a.filter().state().gyro_bias - bias).norm(), estimate ? 1e-4 : 1e-12) << "estimate " << estimate;
+    EXPECT_LT((a.filter().state().w - rate).norm(), 1e-3) << "estimate " << estimate;
+    EXPECT_LT((b.filter().state().w - (rate + bias)).norm(), 1e-3) << "estimate " << estimate;
+  }
+  slam::SlamOptions o = smallSlam();
+  o.filter.initial_gyro_bias.z() = std::nan("");
+  EXPECT_THROW(o.validate(), std::invalid_argument);
+}
+
 TEST(SlamSystem, ConfigFileListsEveryKeyWithTheCodeDefault) {
   const std::string path = std::string(SKIN3D_SOURCE_DIR) + "/config/slam.yaml";
   const slam::SlamOptions from_file = slam::loadSlamOptions(path), defaults;

@@ -105,6 +105,11 @@ struct EskfOptions {
   double initial_angular_rate_std = 0.2;
   /** Initial std of b_g (rad/s) used by reset(const RigState&). Default 0.01 (~0.6 deg/s turn-on bias). */
   double initial_gyro_bias_std = 0.01;
+  /** Gyroscope bias (rad/s, CCS) the SLAM starts from (SlamSystem puts it into the first state). Default zero.
+   *  With estimate_gyro_bias it is the prior mean (std initial_gyro_bias_std); without, the bias assumed
+   *  throughout. A value measured while the rig stood still (scripts/gyro_bias.py) removes most of what the
+   *  images cannot tell from a bias in the first seconds of a scan. */
+  Eigen::Vector3d initial_gyro_bias = Eigen::Vector3d::Zero();
   /** Landmark random walk (m per sqrt(s), along the camera's x, y, z axes at the time of the prediction):
    *  every active landmark gets Q_m = R diag(landmark_walk^2 dt) R^T in predict() (F is unchanged: dm+ = dm + w4).
    *  It models measurement errors that are correlated over frames (the image front end's: the same feature

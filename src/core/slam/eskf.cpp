@@ -216,6 +216,9 @@ void EskfOptions::validate() const {
   nonneg("initial_velocity_std", initial_velocity_std);
   nonneg("initial_angular_rate_std", initial_angular_rate_std);
   nonneg("initial_gyro_bias_std", initial_gyro_bias_std);
+  if (!initial_gyro_bias.allFinite())
+    fail("EskfOptions: initial_gyro_bias = (" + str(initial_gyro_bias.x()) + ", " + str(initial_gyro_bias.y()) + ", " +
+         str(initial_gyro_bias.z()) + ") must be finite");
   if (!landmark_walk.allFinite() || (landmark_walk.array() < 0.0).any())
     fail("EskfOptions: landmark_walk = (" + str(landmark_walk.x()) + ", " + str(landmark_walk.y()) + ", " +
          str(landmark_walk.z()) + ") must be finite and >= 0");

@@ -149,6 +149,7 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
     RigState x0;
     x0.v = initial_v_;
     x0.w = initial_w_;
+    x0.gyro_bias = opt_.filter.initial_gyro_bias;
     filter_.reset(x0);
     // Gyro samples before the first frame cannot be used (no state yet).
     while (!gyro_.empty() && gyro_.front().first <= time) {

@@ -28,28 +28,18 @@ The topic is imu/data under the root or under one namespace (as process_bag find
 """
 import argparse
 import math
+import os
 import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from slam_nees import chi2_quantile  # noqa: E402  (Wilson-Hilferty; no scipy on the rig)
 
 
 def fail(msg, code=2):
     print("gyro_bias.py: " + msg, file=sys.stderr)
     sys.exit(code)
-
-
-def chi2_quantile(p, k):
-    """Wilson-Hilferty approximation of the chi-square quantile (k dof; within 1 % for k >= 3 at 99.9 %)."""
-    # the standard normal quantile by bisection of erf (no scipy on the rig)
-    lo, hi = -10.0, 10.0
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        if 0.5 * (1 + math.erf(mid / math.sqrt(2))) < p:
-            lo = mid
-        else:
-            hi = mid
-    z = 0.5 * (lo + hi)
-    return k * (1 - 2 / (9 * k) + z * math.sqrt(2 / (9 * k))) ** 3
 
 
 def imu_topic(bag, ns):
@@ -166,7 +156,7 @@ def measure(t, w, window, min_duration):
 
 
 def main():
-    ap = argparse.ArgumentParser(usage=__doc__)
+    ap = argparse.ArgumentParser(usage=__doc__.replace("%", "%%"))
     ap.add_argument("bag")
     ap.add_argument("--ns", default=None, help="namespace of imu/data (default: the root, or the only one)")
     ap.add_argument("--out", default=None, help="write the YAML here instead of stdout")

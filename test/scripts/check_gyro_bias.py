@@ -13,16 +13,14 @@ left image at 10 Hz:
 - a shaking rig (the rate swings by 10 mrad/s at 0.5 Hz): exit 1, by the gyro's own check;
 - 1 s of samples: exit 2; a bag without imu/data: exit 2.
 """
-import argparse
 import os
 import subprocess
 import sys
-import tempfile
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from xunit import write_xunit  # noqa: E402
+from xunit import run_checks  # noqa: E402
 
 SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "gyro_bias.py")
 NOISE = 0.002
@@ -123,18 +121,5 @@ def checks(tmp):
     return results
 
 
-def main():
-    ap = argparse.ArgumentParser(usage=__doc__)
-    ap.add_argument("--xunit")
-    a = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        results = checks(tmp)
-    for name, msg in results:
-        print("gyro_bias: %s: %s" % (name, "FAIL: " + msg if msg else "ok"))
-    if a.xunit:
-        write_xunit(a.xunit, "gyro_bias", results)
-    return 1 if any(m for _, m in results) else 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_checks("gyro_bias", __doc__, checks))

@@ -12,17 +12,15 @@ a directory without ground truth is a clear error (exit 2). Runs made in the fra
 consistent with --calibrated-frame and not without it. The landmarks' radial NEES (--landmarks) reads ~1 for
 errors drawn from their covariances and ~4 for covariances 4x too small.
 """
-import argparse
 import math
 import os
 import subprocess
 import sys
-import tempfile
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from xunit import write_xunit  # noqa: E402
+from xunit import run_checks  # noqa: E402
 
 SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "slam_nees.py")
 
@@ -179,18 +177,5 @@ def checks(tmp):
     return results
 
 
-def main():
-    ap = argparse.ArgumentParser(usage=__doc__)
-    ap.add_argument("--xunit")
-    a = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        results = checks(tmp)
-    for name, msg in results:
-        print("nees: %s: %s" % (name, "FAIL: " + msg if msg else "ok"))
-    if a.xunit:
-        write_xunit(a.xunit, "nees", results)
-    return 1 if any(m for _, m in results) else 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_checks("nees", __doc__, checks))

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: BSD-3-Clause
 """The gyroscope's bias from a recording of the rig standing still, as SLAM parameters.
 
-Usage: gyro_bias.py BAG [--ns NS] [--out FILE.yaml] [--min-duration 3] [--window 1]
+Usage: gyro_bias.py BAG [--ns NS] [--out FILE.yaml] [--min-duration 3] [--window 1] [--max-shift 1]
 
 While the rig does not move, every imu/data sample (sensor_msgs/Imu angular_velocity, rad/s, the rig frame) is the
 bias plus white noise, so the bias is their mean, known to sigma / sqrt(n) per axis (sigma: the samples' own spread).
@@ -16,8 +16,8 @@ Stillness checks (exit code 1, naming what moved: record again without touching 
   they scatter more (chi-square test at 99.9 %), the rig shook or the bias drifted;
 - a steady turn passes that test (its mean is constant, like a bias), so when the bag holds stereo/left/image_raw
   (same namespace) no left image (the first against ten spread over the recording) may be shifted by more than
-  --max-shift pixels (phase correlation; 1 px at f = 800 px over 5 s is 0.25 mrad/s). Without images only the first check is made, and it
-  says so.
+  --max-shift pixels (phase correlation; 1 px at f = 800 px over 5 s is 0.25 mrad/s). Without images (or with an
+  encoding other than mono8/mono16/bgr8/rgb8/bgra8/rgba8) only the first check is made, and it says so.
 
 Writes (stdout, or --out) the keys process_bag --config and the eskf_slam nodelet read:
   initial_gyro_bias_x/_y/_z (the mean) and initial_gyro_bias_std (the largest axis' standard error).
@@ -129,7 +129,8 @@ def read_samples(path, ns):
 
 
 def measure(t, w, window, min_duration):
-    """Returns (bias, standard error per axis, stillness statistic, its 99.9 % bound, largest piece deviation)."""
+    """Returns (bias, standard error per axis, sample noise per axis, stillness chi-square, its 99.9 % bound,
+    largest deviation of a piece's mean from the whole, duration in s, number of pieces)."""
     if len(t) < 20:
         fail("only %d gyro samples: record at least %g s of the rig standing still" % (len(t), min_duration))
     duration = t[-1] - t[0]
@@ -178,8 +179,8 @@ def main():
              "chi-square %.1f > %.1f (99.9 %% for white noise). Record again without touching the rig." % (
                  pieces, duration / pieces, 1e3 * worst, stat, bound), code=1)
     if shift is None:
-        print("gyro_bias.py: no stereo/left/image_raw beside %s: stillness checked by the gyro alone (a steady turn "
-              "would pass it)" % topic, file=sys.stderr)
+        print("gyro_bias.py: no usable stereo/left/image_raw beside %s (none, one image, or an unknown encoding): "
+              "stillness checked by the gyro alone (a steady turn would pass it)" % topic, file=sys.stderr)
     else:
         print("gyro_bias.py: %s: images shifted by up to %.2f px from the first (%.2f s later; at most %g)" % (
             shift[0], shift[1], shift[2], a.max_shift), file=sys.stderr)

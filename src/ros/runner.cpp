@@ -2,6 +2,8 @@
 // skin3d_ros: the pieces every pipeline runner shares (see include/skin3d/ros/runner.h).
 #include "skin3d/ros/runner.h"
 
+#include <ros/console.h>
+
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -14,6 +16,19 @@ RunLog RunLog::stderrLog(const std::string& name, bool quiet, double throttle_s)
                 [quiet](int level, const std::string& text) {
                   if (level < 1 || (quiet && level < 2)) return;
                   std::fprintf(stderr, "%s%s\n", level >= 3 ? "error: " : level == 2 ? "warning: " : "", text.c_str());
+                },
+                throttle_s);
+}
+
+RunLog rosLog(const std::string& name, double throttle_s) {
+  return RunLog(name,
+                [](int level, const std::string& text) {
+                  switch (level) {
+                    case 0: ROS_DEBUG("%s", text.c_str()); break;
+                    case 1: ROS_INFO("%s", text.c_str()); break;
+                    case 2: ROS_WARN("%s", text.c_str()); break;
+                    default: ROS_ERROR("%s", text.c_str()); break;
+                  }
                 },
                 throttle_s);
 }

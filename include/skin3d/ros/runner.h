@@ -61,6 +61,9 @@ class RunLog {
   std::map<std::string, Last> last_;
 };
 
+/** @brief A log into ROS's (rosout) under `name`: what a nodelet's runner uses. */
+RunLog rosLog(const std::string& name, double throttle_s = 2.0);
+
 /** @brief The one place that drops bad input: counted per fault, logged (throttled), kept for the results. */
 class InputLedger {
  public:

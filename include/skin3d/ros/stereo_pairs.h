@@ -27,6 +27,7 @@ class StereoPairs {
   bool add(const std::string& topic, const rosbag::MessageInstance& mi) {
     if (topic == "stereo/left/camera_info" || topic == "stereo/right/camera_info") {
       const bool left = topic == "stereo/left/camera_info";
+      (left ? info_msg_l_ : info_msg_r_) = mi.instantiate<sensor_msgs::CameraInfo>();  // the latest, as received
       if (!(left ? rect_l_ : rect_r_)) {
         (left ? info_l_ : info_r_) = ros_conv::fromMsg(*mi.instantiate<sensor_msgs::CameraInfo>());
         (left ? rect_l_ : rect_r_) = std::make_unique<stereo::Rectifier>(left ? info_l_ : info_r_);
@@ -62,6 +63,9 @@ class StereoPairs {
   }
 
   bool calibrated() const { return rect_l_ && rect_r_; }
+  /** @brief The latest camera_info message of each side (what a live subscriber pairs with the images). */
+  const sensor_msgs::CameraInfo::ConstPtr& leftInfoMsg() const { return info_msg_l_; }
+  const sensor_msgs::CameraInfo::ConstPtr& rightInfoMsg() const { return info_msg_r_; }
   bool haveLeftInfo() const { return static_cast<bool>(rect_l_); }
   const geometry::CameraInfo& leftInfo() const { return info_l_; }
   const geometry::CameraInfo& rightInfo() const { return info_r_; }
@@ -72,6 +76,7 @@ class StereoPairs {
  private:
   geometry::CameraInfo info_l_, info_r_;
   std::unique_ptr<stereo::Rectifier> rect_l_, rect_r_;
+  sensor_msgs::CameraInfo::ConstPtr info_msg_l_, info_msg_r_;
   std::map<ros::Time, sensor_msgs::Image::ConstPtr> pending_l_, pending_r_;
 };
 

@@ -21,6 +21,22 @@
 namespace skin3d {
 namespace ros_conv {
 
+/** @brief A fault of a stereo pair's four messages and the topic it is on. */
+struct PairFault {
+  std::string topic;  //!< empty: no fault
+  std::string fault;
+  explicit operator bool() const { return !topic.empty(); }
+};
+
+/**
+ * @brief The checks every door applies to a raw stereo pair (stereo/{left,right}/image_raw + camera_info): each
+ * camera_info (ros_conv::checkCameraInfo), each image against its camera_info (ros_conv::checkImage), left and
+ * right sizes, distinct frame_ids, stamps at most `max_stamp_diff` s apart. @return the first fault found.
+ */
+PairFault checkStereoPair(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
+                          const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info,
+                          double max_stamp_diff = 0.005);
+
 class StereoSync {
  public:
   using Callback = std::function<void(const sensor_msgs::Image::ConstPtr&, const sensor_msgs::CameraInfo::ConstPtr&,
@@ -32,6 +48,8 @@ class StereoSync {
    * @return empty, or the problem with a parameter to log (a ~queue_size below 1 is replaced by 5).
    */
   std::string subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& image, Callback callback);
+  /** @brief As above with the queue (>= 1) and the policy given. Destroying the StereoSync unsubscribes. */
+  void subscribe(ros::NodeHandle& nh, const std::string& image, int queue_size, bool approximate, Callback callback);
 
  private:
   // message_filters binds a member function to the four messages (a std::function would be bound to nine)

@@ -144,7 +144,7 @@ void FrontEndRunner::connectionChanged() {
                       0;
   if (wanted && !sync_) {
     sync_ = std::make_unique<ros_conv::StereoSync>();
-    sync_->subscribe(nh_, "image_raw", queue_size_, approximate_,
+    sync_->subscribe(*nh_, "image_raw", queue_size_, approximate_,
                      [this](const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
                             const sensor_msgs::Image::ConstPtr& ri,
                             const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); });
@@ -171,7 +171,7 @@ void FrontEndRunner::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s) {
 
 void FrontEndRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std::string& node_name, int queue_size,
                             bool approximate_sync) {
-  nh_ = nh;
+  nh_ = std::make_unique<ros::NodeHandle>(nh);
   queue_size_ = queue_size;
   approximate_ = approximate_sync;
   const ros::SubscriberStatusCallback changed = [this](const ros::SingleSubscriberPublisher&) { connectionChanged(); };

@@ -215,7 +215,6 @@ void SlamRunner::onGroundTruth(const geometry_msgs::PoseStamped& msg) {
   }
   if (!truth_.empty() && g.t < truth_.back().t - par_.jump_back) truth_.clear();  // a restarted bag
   truth_.push_back(g);
-  truth_.back().q.normalize();
   if (truth_path_) {
     const std::string problem =
         truth_path_->add(msg, par_.jump_back, run_.trajectory.empty() ? nullptr : &run_.trajectory.front());

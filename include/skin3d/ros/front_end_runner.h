@@ -74,7 +74,7 @@ class FrontEndRunner {
 
   // live only
   bool attached_ = false;
-  ros::NodeHandle nh_;
+  std::unique_ptr<ros::NodeHandle> nh_;  // live only (a NodeHandle needs ros::init)
   int queue_size_ = 5;
   bool approximate_ = false;
   std::mutex connect_mutex_;

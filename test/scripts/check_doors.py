@@ -1,0 +1,99 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: BSD-3-Clause
+"""The two doors give the same numbers: one bag through `roslaunch skin3d replay_globe.launch` (the live nodelets)
+and through `process_bag` (the offline tool), each with its defaults, gives the same trajectory.tum to the last
+digit (and the same map.ply), for image bags with and without the gyro and for a landmark bag.
+
+usage: check_doors.py --process-bag PATH --data DIR [--xunit FILE]
+
+DIR holds the bags the build makes (globe_images_10.bag, globe_landmarks_40.bag). roslaunch runs on a free port
+with its own master, so it does not meet another test's. Exit status 1 when a check fails.
+"""
+import argparse
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from xunit import write_xunit  # noqa: E402
+
+CASES = [
+    # name, bag, process_bag options, launch arguments
+    ("images", "globe_images_10.bag", [], ["images:=true"]),
+    ("images_gyro", "globe_images_10.bag", ["--gyro"], ["images:=true", "gyro:=true"]),
+    ("landmarks_gyro", "globe_landmarks_40.bag", ["--gyro"], ["gyro:=true"]),
+]
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("localhost", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def read(path):
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as e:
+        return None if e else None
+
+
+def run_case(tmp, process_bag, data, case):
+    name, bag, pb_args, launch_args = case
+    bag = os.path.join(data, bag)
+    if not os.path.exists(bag):
+        return "the test bag %s is missing (built by the skin3d_*_test_bag targets)" % bag
+    off, live = os.path.join(tmp, name + "_process_bag"), os.path.join(tmp, name + "_launch")
+    r = subprocess.run([process_bag, "--bag", bag, "--out", off, "--quiet"] + pb_args,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=600)
+    if r.returncode != 0:
+        return "process_bag failed (%d): %s" % (r.returncode, r.stdout[-2000:])
+    port = free_port()
+    env = dict(os.environ, ROS_MASTER_URI="http://localhost:%d" % port, ROS_HOME=os.path.join(tmp, "ros_home"))
+    cmd = ["roslaunch", "-p", str(port), "skin3d", "replay_globe.launch", "bag:=" + bag, "results:=" + live,
+           "wait_for_subscribers:=true"] + launch_args
+    try:
+        r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, timeout=600)
+    except subprocess.TimeoutExpired:
+        return "roslaunch did not end within 600 s"
+    if r.returncode != 0:
+        return "roslaunch failed (%d): %s" % (r.returncode, r.stdout[-2000:])
+    for f in ("trajectory.tum", "map.ply"):
+        a, b = read(os.path.join(off, f)), read(os.path.join(live, f))
+        if a is None or b is None:
+            return "%s missing (process_bag: %s, launch: %s); launch output: %s" % (
+                f, a is not None, b is not None, r.stdout[-2000:])
+        if a != b:
+            la, lb = a.decode().splitlines(), b.decode().splitlines()
+            first = next((i for i in range(min(len(la), len(lb))) if la[i] != lb[i]), min(len(la), len(lb)))
+            return "%s differs: %d lines from process_bag, %d from the launch; first difference at line %d: %r vs %r" % (
+                f, len(la), len(lb), first + 1, la[first] if first < len(la) else "", lb[first] if first < len(lb) else "")
+    print("check_doors: %s: %s identical through both doors (%d lines)" % (
+        name, "trajectory.tum and map.ply", len(read(os.path.join(off, "trajectory.tum")).splitlines())))
+    return ""
+
+
+def main():
+    ap = argparse.ArgumentParser(usage=__doc__.replace("%", "%%"))
+    ap.add_argument("--process-bag", required=True)
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--xunit")
+    a = ap.parse_args()
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in CASES:
+            results.append((case[0], run_case(tmp, a.process_bag, a.data, case)))
+    for name, msg in results:
+        print("doors: %s: %s" % (name, "FAIL: " + msg if msg else "ok"))
+    if a.xunit:
+        write_xunit(a.xunit, "doors", results)
+    return 1 if any(m for _, m in results) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -41,7 +41,7 @@ enum class CalibrationErrorModel {
    *  correlated the way a real calibration's are: the principal points may be off by a pixel each, but the
    *  disparity a board at a known distance produces is fitted, so the depth error stays small. */
   Chessboard,
-  /** Each parameter is drawn independently (the model up to session 5): principal points, focal lengths,
+  /** Each parameter is drawn independently (the datasets' model before the simulated chessboard calibration): principal points, focal lengths,
    *  baseline and relative rotation. Independent principal-point errors shift the disparity by
    *  sqrt(2) * principal_point_px, which a calibration against a metric board would not leave. */
   Independent,

@@ -118,7 +118,7 @@ TEST(IndurationAccuracy, FullResolutionWorkpieceWithRealism) {
   ::testing::Test::RecordProperty("worst_height_error_um", static_cast<int>(std::round(1e3 * worst_h)));
   ::testing::Test::RecordProperty("worst_area_error_permille", static_cast<int>(std::round(1e3 * worst_a)));
   ::testing::Test::RecordProperty("worst_repeatability_std_um", static_cast<int>(std::round(1e3 * worst_std)));
-  // the report files of DESIGN.md
+  // the report files of docs/design.md
   for (const char* f : {"induration.yaml", "height_map.png", "surface.ply"})
     EXPECT_EQ(run(std::string("test -s ") + out + "/" + f), 0) << f;
 }

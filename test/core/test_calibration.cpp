@@ -393,7 +393,7 @@ TEST(CalibrationSynthetic, ConvergedRigRecoversBaselineAndAngleAndKeepsTheBoardI
   EXPECT_GT(calib.rms_px, 0.2);
   EXPECT_LT(calib.rms_px, 0.32);
   EXPECT_TRUE(calib.converged);
-  EXPECT_FALSE(calib.zero_disparity);  // DESIGN.md: CALIB_ZERO_DISPARITY would move the board out of the images
+  EXPECT_FALSE(calib.zero_disparity);  // docs/design.md: CALIB_ZERO_DISPARITY would move the board out of the images
   EXPECT_EQ(calib.board_points_inside, static_cast<int>(calib.board_points.size()));
   // A usable rectified resolution (OpenCV's alpha > 0 with flags 0 shrinks the focal length to a few px here).
   EXPECT_GT(calib.left.P(0, 0), 0.5 * 656.25) << calib.rectification_note;

@@ -6,7 +6,7 @@
  *  - Middlebury 2006 "Aloe" (real pair, ground-truth disparity from the dataset): bad-pixel rates (> 1 px,
  *    > 0.5 px) and RMS error of skin3d's matcher and of plain cv::StereoSGBM measured in the same run;
  *    skin3d must be no worse than SGBM at 1 px on the pixels it reports, and better at 1 px with the pixels it
- *    leaves unknown counted as bad (issue 15).
+ *    leaves unknown counted as bad.
  *  - Bad input (empty, mismatched, ROI outside, bad range, no texture, no overlap, saturation): an error or a
  *    warning naming the problem, never a crash.
  *  - Synthetic pair with known sub-pixel, spatially varying disparity (a plane d = d0 + a x + b y) rendered from
@@ -244,7 +244,7 @@ TEST(DenseStereoAloe, NoWorseThanPlainSgbmAtOnePixel) {
 
   EXPECT_LE(mk.bad1_i, ms.bad1_i) << "skin3d's bad-pixel rate (> 1 px, pixels it reports) " << 100 * mk.bad1_i
                                   << " % is worse than plain StereoSGBM's " << 100 * ms.bad1_i << " %";
-  // Issue 15: counting the pixels a method leaves unknown as bad, skin3d must beat plain SGBM too (it answers
+  // Counting the pixels a method leaves unknown as bad, skin3d must beat plain SGBM too (it answers
   // for about as many pixels, and precisely).
   EXPECT_LT(mk.bad1_ii, ms.bad1_ii) << "skin3d's bad-pixel rate (> 1 px, unknown = bad) " << 100 * mk.bad1_ii
                                     << " % is not below plain StereoSGBM's " << 100 * ms.bad1_ii << " %";

@@ -77,7 +77,7 @@ TEST(Design, ShippedConfigsWork) {
   EXPECT_GT(p1.overlap_area_mm2, 0.0);
   EXPECT_GE(p1.grid.size(), 10u);
   const DesignReport slam = computeDesign(loadDesignConfig(SKIN3D_SOURCE_DIR "/config/slam_rig_design.yaml"));
-  // DESIGN.md: with 2.24 um pixels the two views overlap by about two thirds at 400 mm, fx ~ 804 px, 43 deg.
+  // docs/design.md: with 2.24 um pixels the two views overlap by about two thirds at 400 mm, fx ~ 804 px, 43 deg.
   EXPECT_NEAR(slam.focal_length_px, 803.6, 0.1);
   EXPECT_NEAR(slam.aov_h_deg, 43.4, 0.1);
   EXPECT_GT(slam.overlap_fraction, 0.55);

@@ -87,7 +87,7 @@ TEST(Rectification, WidePlateGetsFittedProjections) {
 }
 
 TEST(Rectification, ZeroDisparityLosesTheConvergedScene) {
-  // The platform fact in DESIGN.md: CALIB_ZERO_DISPARITY moves the plate out of the rectified images.
+  // The platform fact in docs/design.md: CALIB_ZERO_DISPARITY moves the plate out of the rectified images.
   const auto rig = partOneRig();
   const auto pair = stereo::rectifyStereo(rig);
   ASSERT_TRUE(pair.zero_disparity);

@@ -31,7 +31,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
-// The thesis' set-up (ch. 7, DESIGN.md "globe"), typed in independently of the header's defaults.
+// The thesis' set-up (ch. 7, docs/design.md "globe"), typed in independently of the header's defaults.
 constexpr double kRadius = 0.200, kDistance = 0.600, kLatitude = -25.0 * kDeg, kTilt = 23.0 * kDeg, kRate = 0.15;
 
 /** The globe's spin axis z_G in the world, from the poses alone: the rig turns by -rate t about z_G. */

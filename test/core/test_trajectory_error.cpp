@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Trajectory files and the ATE (issue 16): TUM stamps keep their nanoseconds (epoch stamps 0.1 s apart stay
+// Trajectory files and the ATE: TUM stamps keep their nanoseconds (epoch stamps 0.1 s apart stay
 // distinct), time association, and the alignment of a reference that lives in another world (motion capture,
 // EuRoC-style). The truth is generated here (a circular orbit, a known world transform, a known per-pose error),
 // never taken from the code under test.

@@ -20,7 +20,7 @@ Eigen::Matrix3d makeK(double f, double cx, double cy) {
   return K;
 }
 
-// The SLAM rig of DESIGN.md: f 1.8 mm / 2.24 um, 640x480, right camera at (105, 0, 15) mm.
+// The SLAM rig of docs/design.md: f 1.8 mm / 2.24 um, 640x480, right camera at (105, 0, 15) mm.
 StereoRig slamRig(std::vector<double> D = {}) {
   const PinholeCamera cam(makeK(1.8 / 2.24e-3, 319.5, 239.5), 640, 480, D);
   return StereoRig::fromRightPose(cam, cam, Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.105, 0.0, 0.015));

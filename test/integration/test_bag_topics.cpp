@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Bag topic names (issue 16): skin3d's relative names, absolute names (rosbag record -a), a namespace (found
+// Bag topic names: skin3d's relative names, absolute names (rosbag record -a), a namespace (found
 // or given), several namespaces (an error naming them), and nothing matching (an error listing the bag's
 // topics); on real bags written here (no ROS master needed).
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// The front end's landmarks against the rendered globe's ground truth (issue 4 quality bar): a
+// The front end's landmarks against the rendered globe's ground truth (the front end's quality target): a
 // globe-images bag is made by the real tool, then rectified, matched and triangulated with the core
 // exactly as the nodelets do; errors are measured against the true sphere.
 #include <geometry_msgs/PoseStamped.h>
@@ -174,7 +174,7 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
   EXPECT_GE(*std::min_element(s.per_frame.begin(), s.per_frame.end()), 100) << "too few landmarks for SLAM";
 
   std::ofstream(tmp("exact.yaml")) << "images: {calibration_error: {enabled: false}}\n";
-  // CI: 6 frames of seed 1. The README's 40-frame, 5-seed figures: SKIN3D_ACCURACY_FRAMES=40 SKIN3D_ACCURACY_SEED=N;
+  // CI: 6 frames of seed 1. The 40-frame, 5-seed figures of docs/validation.md: SKIN3D_ACCURACY_FRAMES=40 SKIN3D_ACCURACY_SEED=N;
   // SKIN3D_ACCURACY_DUMP=PREFIX also writes PREFIX_kaze.csv and PREFIX_akaze.csv, a row per landmark (pixels, size,
   // strength, modelled variances, NEES, the right pixel's error against the truth projected, depth).
   const char* frames = std::getenv("SKIN3D_ACCURACY_FRAMES");
@@ -196,7 +196,7 @@ TEST(FrontEndAccuracy, RenderedGlobeLandmarks) {
     // 20 predicted sigmas anywhere on the globe (40 frames of seeds 1-5 too; before FeatureOptions::border_margin,
     // seed 3 had one, 10.09 mm: a unique candidate near the right image's edge).
     EXPECT_LT(*std::max_element(e.abs_radial_mm.begin(), e.abs_radial_mm.end()), 10.0) << stereo::featureTypeName(type);
-    // Covariance consistency (issue 4 bar, NOT fully met: see the issue notes). A consistent covariance gives a
+    // Covariance consistency (quality target NOT fully met: see docs/validation.md, "Stereo front end"). A consistent covariance gives a
     // 3D NEES averaging 3 with 0.1 % beyond the chi2(3) 99.9 % point 16.27. The front end's errors are
     // heavy-tailed (oblique surface, large keypoints), so we guard what holds today: the average within 3 / 1.5
     // .. 3 x 1.5 and at most 5 % beyond 16.27 (without the slant-dependent noise model: mean 6.3, 8.8 %).

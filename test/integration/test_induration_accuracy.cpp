@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Issue 6 verification: the rendered workpiece at full resolution (4224x3136, the dataset's realism on:
+// Induration accuracy: the rendered workpiece at full resolution (4224x3136, the dataset's realism on:
 // perturbed calibration, blur, photometric differences, noise; 3 exposures) made by the real dataset tool,
 // measured by the real offline path (process_bag --induration), compared with the generator's truth file.
 // Bars: every plateau 0.1-0.7 mm found in every frame, height within +-0.02 mm (target 0.01), the PASI class
@@ -118,7 +118,7 @@ TEST(IndurationAccuracy, FullResolutionWorkpieceWithRealism) {
   ::testing::Test::RecordProperty("worst_height_error_um", static_cast<int>(std::round(1e3 * worst_h)));
   ::testing::Test::RecordProperty("worst_area_error_permille", static_cast<int>(std::round(1e3 * worst_a)));
   ::testing::Test::RecordProperty("worst_repeatability_std_um", static_cast<int>(std::round(1e3 * worst_std)));
-  // the report files of DESIGN.md
+  // the report files of docs/design.md
   for (const char* f : {"induration.yaml", "height_map.png", "surface.ply"})
     EXPECT_EQ(run(std::string("test -s ") + out + "/" + f), 0) << f;
 }

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Issue 7: the plots and the one-page HTML report on real results directories. process_bag runs experiments 2
+// The plots and the one-page HTML report on real results directories. process_bag runs experiments 2
 // and 3 on the 40-frame landmark globe and the induration on the quarter-resolution workpiece (both made at
 // build time); then scripts/report.py, scripts/slam_report.py and scripts/skin3d_plots.py run on them, and
 // test/scripts/check_report.py checks the page against the results files and the generator's truth.

@@ -3,7 +3,7 @@
 // tools end to end (make_dataset -> process_bag), checked against the generator's ground truth.
 //
 // Reduced dataset: the globe turns 4x faster (0.6 rad/s), so one full loop takes 105 frames instead of 420 (the
-// full-size experiments run in scripts/demo; their figures are in the README and the issue notes). Bounds
+// full-size experiments run in scripts/demo; their figures are in docs/validation.md). Bounds
 // are the issue's full-loop targets loosened for 4x fewer observations of each landmark (errors ~ 1/sqrt(n):
 // 2x) plus margin, and the orderings the issue asks for (exp. 3 better than exp. 2).
 #include <gtest/gtest.h>
@@ -116,7 +116,7 @@ std::string slurp(const std::string& path) {
 
 }  // namespace
 
-// Issue 18: image bags run as a pipeline (the front end of pair k on a second thread while the SLAM processes
+// Image bags run as a pipeline (the front end of pair k on a second thread while the SLAM processes
 // pair k-1). The SLAM must see the same frames and gyro samples in the same order as one stage after the other
 // (--serial): every results file that holds estimates is the same byte for byte.
 TEST(ProcessBagPipeline, SameResultsAsOneStageAfterTheOther) {

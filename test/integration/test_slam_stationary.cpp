@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Issue 18: a stationary rig whose gyroscope has a large bias (0.08 rad/s on one axis; real recordings show such
+// A stationary rig whose gyroscope has a large bias (0.08 rad/s on one axis; real recordings show such
 // biases) must stay within 5 mm of its start over 5 s when the bias is estimated (process_bag's defaults with
 // --gyro --set estimate_gyro_bias=true), and the estimated bias must reach the generator's. The real tools end
 // to end: make_dataset (the globe held still: rate_rad_s 0) -> process_bag, on the landmark-level globe (one run

@@ -211,7 +211,7 @@ TEST(IndurationReplay, ReportsMatchTheTruth) {
   }
 }
 
-// ~save_results writes the results directory of DESIGN.md.
+// ~save_results writes the results directory of docs/design.md.
 TEST(IndurationReplay, SaveResults) {
   ros::NodeHandle pnh("~");
   std::string results;

@@ -60,7 +60,7 @@ TEST(SlamReplay, TrajectoryAgainstGroundTruth) {
   std::printf("RMS position error over %zu frames: %.3f mm (bound %.3f mm)\n", odometry.size(), 1e3 * rms, 1e3 * bound);
   EXPECT_LT(rms, bound);
 
-  // The results directory written by the nodelet (issue 7): the ground truth it received on ground_truth/pose
+  // The results directory written by the nodelet: the ground truth it received on ground_truth/pose
   // gives the ATE in summary.yaml (the same figure as above, from the nodelet's own pairing), and
   // parameters.yaml lists the effective parameters.
   ros::ServiceClient save = nh.serviceClient<skin3d::SaveResults>("eskf_slam/save_results");

@@ -1,6 +1,6 @@
 /**
  * @file induration_io.h
- * @brief Results of an induration measurement for people and programs: induration.yaml (DESIGN.md,
+ * @brief Results of an induration measurement for people and programs: induration.yaml (docs/design.md,
  * "Results of an offline run"), the false-colour height map with a scale bar in mm, and the coloured
  * surface mesh (PLY).
  *

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
  * @file
- * @brief The topics of a recorded bag under the relative names skin3d uses (DESIGN.md "Topics").
+ * @brief The topics of a recorded bag under the relative names skin3d uses (docs/design.md "Topics").
  *
  * skin3d's own datasets store relative names (`stereo/left/image_raw`); bags recorded by others store absolute
  * ones (`rosbag record -a` writes `/stereo/left/image_raw`), possibly under a namespace

@@ -1,6 +1,6 @@
 /**
  * @file dataset.h
- * @brief Configuration of the simulated datasets (DESIGN.md "Datasets") and the calibration
+ * @brief Configuration of the simulated datasets (docs/design.md "Datasets") and the calibration
  * perturbation that makes a rendered dataset as imperfect as a real stereo calibration.
  *
  * Kinds: globe-landmarks (thesis' landmark-level globe simulator), globe-images (the same scene
@@ -41,7 +41,7 @@ enum class CalibrationErrorModel {
    *  correlated the way a real calibration's are: the principal points may be off by a pixel each, but the
    *  disparity a board at a known distance produces is fitted, so the depth error stays small. */
   Chessboard,
-  /** Each parameter is drawn independently (the model up to session 5): principal points, focal lengths,
+  /** Each parameter is drawn independently (the datasets' model before the simulated chessboard calibration): principal points, focal lengths,
    *  baseline and relative rotation. Independent principal-point errors shift the disparity by
    *  sqrt(2) * principal_point_px, which a calibration against a metric board would not leave. */
   Independent,
@@ -60,7 +60,7 @@ struct CalibrationPerturbation {
   int views = 15;                     //!< board poses (pairs) used by the simulated calibration
   /** Corner localisation noise, px per coordinate (1 sigma). 0.14 px gives the simulated calibration an RMS
    *  reprojection error of ~0.2 px (OpenCV's RMS is per corner, both coordinates: sqrt(2) sigma), what
-   *  calibrate_stereo reaches on the real pairs in ../shared/data/chessboard_stereo (0.197 px). */
+   *  calibrate_stereo reaches on 13 real chessboard pairs (0.197 px; the shared test data, SKIN3D_SHARED_DIR). */
   double corner_sigma_px = 0.14;
   int board_cols = 9, board_rows = 6;  //!< inner corners, as the real board
   /** Radial distortion coefficients the calibration estimates (calibrate_stereo's --k-coefficients). */

@@ -9,7 +9,7 @@
  *    (measured in G) and distance `distance` from the centre, its left optical axis pointing at the
  *    centre. The lab "up" direction is tilted by `tilt` from z_G; the left camera's image x axis is
  *    kept horizontal in the lab (no roll), so the tilt shows as an inclined spin axis in the images.
- *  - World frame W (the SLAM's origin, DESIGN.md "world"): the left optical frame at t = 0.
+ *  - World frame W (the SLAM's origin, docs/design.md "world"): the left optical frame at t = 0.
  *    Ground-truth poses are T_W_L(t) (world <- left optical frame); the sphere centre in W is
  *    (0, 0, distance) at t = 0 by construction.
  *  - Landmarks: `landmarks` points uniformly distributed over the sphere (fixed in G, hence in W),

@@ -1,6 +1,6 @@
 /**
  * @file skin.h
- * @brief The skin scene: a limb with raised psoriatic plaques and low-contrast skin albedo (DESIGN.md
+ * @brief The skin scene: a limb with raised psoriatic plaques and low-contrast skin albedo (docs/design.md
  * "Datasets", kind `skin`), with its exact truth.
  *
  * Geometry, in the LIMB frame (the dataset's world frame): x along the limb axis, the cross-section an ellipse

@@ -2,7 +2,7 @@
  * @file eskf.h
  * @brief Error-state EKF SLAM of a stereo rig (thesis ch. 5-6, Algorithm 5.1; ESKF_NOTES.md "ES-EKF SLAM").
  *
- * Nominal state (SI units, frames of DESIGN.md):
+ * Nominal state (SI units, frames of docs/design.md):
  *   p   position of the CCS (left optical frame) origin in the world (m),
  *   q   Hamilton unit quaternion, world <- CCS, R = R(q),
  *   v   linear velocity in the CCS (m/s),   w (omega) angular velocity in the CCS (rad/s),

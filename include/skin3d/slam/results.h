@@ -1,6 +1,6 @@
 /**
  * @file results.h
- * @brief The results directory of a SLAM run (DESIGN.md "Results of an offline run"): trajectory.tum,
+ * @brief The results directory of a SLAM run (docs/design.md "Results of an offline run"): trajectory.tum,
  * map.ply, sphere_fit.yaml, state.csv (per-frame filter state for plots) and summary.yaml; plus the absolute
  * trajectory error against a reference trajectory. Used by the eskf_slam nodelet and by process_bag.
  *

@@ -20,7 +20,7 @@
  *     landmarks through the exact stereo augmentation, in slots the pool hands out (growing the pool, or
  *     evicting by its policy when full).
  * The first frame defines the world: the rig starts at the identity with the options' initial velocity
- * uncertainty, so world = left optical frame of the first frame (DESIGN.md "world").
+ * uncertainty, so world = left optical frame of the first frame (docs/design.md "world").
  *
  * Known map (thesis experiment 1): setKnownMap() gives landmark positions (and descriptors) that are
  * exact; associated measurements then update only the rig (no landmark states).

@@ -9,7 +9,7 @@
  * camera_calibration does) -> rectification with stereo::rectifyStereo():
  *  - a near-parallel rig (axes angle <= converged_threshold_rad) gets ROS's CALIB_ZERO_DISPARITY, alpha 0;
  *  - a strongly converged rig (the thesis' 54.4 deg one) gets flags 0 and the smallest alpha that keeps every
- *    board corner of every used view inside both rectified images (DESIGN.md, "Known facts"); when alpha 0 does
+ *    board corner of every used view inside both rectified images (docs/design.md, "Known facts"); when alpha 0 does
  *    not, the rectified projections are fitted to those corners instead (see projection_fitted).
  *
  * Units: the core is SI. The board's square size is in metres, so the baseline, the right camera's

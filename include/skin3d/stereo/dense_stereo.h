@@ -87,8 +87,8 @@ struct DenseStereoOptions {
    *  fit). 0.5 = the texture's signal at least equals the noise. */
   double min_correlation = 0.5;
   /** Weak-texture mode (skin): SGBM on locally normalised images, the fit decides where SGBM left holes (there
-   *  with correlation >= 0.5), islands of valid pixels removed at full resolution; the default since issue 15.
-   *  Off: only SGBM's answers are refined (the speckle plate's matcher before issue 15). */
+   *  with correlation >= 0.5), islands of valid pixels removed at full resolution; the default.
+   *  Off: only SGBM's answers are refined (the speckle plate's matcher). */
   bool weak_texture = true;
   bool vertical = true;          //!< also fit a vertical shift (absorbs rectification error up to ~2 px)
 };

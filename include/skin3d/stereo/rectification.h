@@ -5,8 +5,8 @@
  *
  * With OpenCV's default CALIB_ZERO_DISPARITY (what ROS camera_calibration uses), a strongly converged
  * rig's scene leaves both rectified images. With points of interest given, rectification uses flags 0
- * (each camera keeps its own principal point; the right P then has a different cx, which
- * image_geometry's StereoCameraModel handles through the disparity offset) and alpha 0; if the points of
+ * (each camera keeps its own principal point; the right P then has a different cx, which skin3d's matching
+ * and triangulation take into account as the disparity offset cx_l - cx_r) and alpha 0; if the points of
  * interest do not all fit, OpenCV's alpha > 0 is no help (for a 54.4 deg rig it puts the principal point
  * outside the image and shrinks or flips the focal length), so the rotations are kept and the projections
  * fitted to the points (fitRectifiedProjection).

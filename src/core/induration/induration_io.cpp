@@ -384,7 +384,7 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
 
   std::ofstream f(path);
   if (!f) throw std::runtime_error("cannot write induration results to '" + path + "'");
-  f << "# skin3d induration measurement (DESIGN.md, \"Results of an offline run\").\n"
+  f << "# skin3d induration measurement (docs/design.md, \"Results of an offline run\").\n"
        "# Heights above the healthy-skin reference in mm, areas on the reference in mm^2, positions in m\n"
        "# (frame_id); the reference plane is n.x + d = 0 with n towards the camera. repeatability: each plaque\n"
        "# of frame 0 matched in every frame by the nearest centroid within match_radius_mm; mean and sample\n"

@@ -168,7 +168,7 @@ void checkCalibrationInput(const StereoCorners& corners, const ChessboardPattern
 }
 
 /**
- * Rectification of the calibrated rig (DESIGN.md: a strongly converged rig loses its scene with
+ * Rectification of the calibrated rig (docs/design.md: a strongly converged rig loses its scene with
  * CALIB_ZERO_DISPARITY): as ROS camera_calibration for a near-parallel rig; for a converged one, alpha 0 when it
  * keeps every board corner inside, else a rectified projection fitted to keep them (out.rectification_note says
  * which, out.projection_fitted whether fitted).

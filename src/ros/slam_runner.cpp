@@ -147,7 +147,7 @@ void SlamRunner::onLandmarks(const skin3d::LandmarkArray& msg) {
     ledger_.drop("stereo/landmarks", t, "zero stamp");
     return;
   }
-  const double newest = waiting_.empty() ? last_frame_ : waiting_.back().header.stamp.toSec();
+  const double newest = waiting_.empty() ? last_frame_ : waiting_.back().msg.header.stamp.toSec();
   if (slam_->initialised() && t < newest - par_.jump_back) {
     log_.warn("time jumped back by " + std::to_string(newest - t) + " s (bag restarted?): resetting the SLAM");
     drainLocked(true);
@@ -156,22 +156,24 @@ void SlamRunner::onLandmarks(const skin3d::LandmarkArray& msg) {
     ledger_.drop("stereo/landmarks", t, t == newest ? "duplicate stamp" : "stamp older than the previous frame's");
     return;
   }
-  waiting_.push_back(msg);
+  waiting_.push_back({msg, std::chrono::steady_clock::now()});
   drainLocked(false);
 }
 
 void SlamRunner::drainLocked(bool all) {
   const bool gyro = slam_->options().use_gyro;
+  const auto now = std::chrono::steady_clock::now();
   while (!waiting_.empty()) {
-    const double t = waiting_.front().header.stamp.toSec();
-    const double lag = waiting_.back().header.stamp.toSec() - t;
+    const double t = waiting_.front().msg.header.stamp.toSec();
+    const double lag = waiting_.back().msg.header.stamp.toSec() - t;
+    const double waited = std::chrono::duration<double>(now - waiting_.front().arrived).count();
     const bool ready = all || !gyro || last_gyro_ >= t;
-    if (!ready && lag <= par_.gyro_wait) return;
+    if (!ready && lag <= par_.gyro_wait && waited <= par_.gyro_wait) return;
     if (!ready)
       log_.warnThrottled("gyro lag", "imu/data lags: the frame at t = " + std::to_string(t) +
                                          " s is processed without the gyro samples up to its stamp (~gyro_wait " +
                                          std::to_string(par_.gyro_wait) + " s)");
-    const skin3d::LandmarkArray msg = std::move(waiting_.front());
+    const skin3d::LandmarkArray msg = std::move(waiting_.front().msg);
     waiting_.pop_front();
     processLocked(msg);
   }
@@ -348,6 +350,10 @@ void SlamRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std::st
   diagnostics_->setHardwareID("skin3d " + node_name);
   diagnostics_->add("SLAM", this, &SlamRunner::diagnose);
   diag_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
+  wait_timer_ = nh.createWallTimer(ros::WallDuration(0.05), [this](const ros::WallTimerEvent&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    drainLocked(false);
+  });
   const slam::SlamOptions& opt = slam_->options();
   log_.info(std::string(opt.use_gyro ? "with gyroscope" : "without gyroscope") + ", pool up to " +
             std::to_string(opt.pool.max_capacity) + " landmarks, " + std::to_string(opt.max_updates_per_frame) +

@@ -8,7 +8,7 @@
  * Frames and gyro samples: with use_gyro, a frame is processed only once a gyro sample at or after its stamp has
  * arrived (the samples up to a frame are then all there, whichever arrived first: the gyro comes straight from
  * the driver or bag, the landmarks later through the front end), or when the gyro lags by more than ~gyro_wait
- * (then with a throttled warning). So the live path and process_bag integrate the same samples for every frame.
+ * (stamp time, or wall time since the frame came; then with a throttled warning), or at the end of the input. So the live path and process_bag integrate the same samples for every frame.
  */
 #pragma once
 
@@ -17,6 +17,7 @@
 #include <sensor_msgs/Imu.h>
 #include <skin3d/LandmarkArray.h>
 
+#include <chrono>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -109,7 +110,11 @@ class SlamRunner {
   std::unique_ptr<slam::SlamSystem> slam_;
   slam::RunRecord run_;
   std::vector<slam::StampedPose> truth_;                 // as the input gave it
-  std::deque<skin3d::LandmarkArray> waiting_;            // frames waiting for the gyro
+  struct Waiting {
+    skin3d::LandmarkArray msg;
+    std::chrono::steady_clock::time_point arrived;
+  };
+  std::deque<Waiting> waiting_;                          // frames waiting for the gyro
   double last_gyro_ = -1e300;                            // stamp of the newest gyro sample
   double last_frame_ = -1e300;                           // stamp of the newest frame taken
   bool unsaved_ = false;
@@ -123,6 +128,7 @@ class SlamRunner {
   ros::Subscriber sub_landmarks_, sub_imu_, sub_truth_;
   ros::ServiceServer srv_reset_, srv_save_;
   ros::Timer diag_timer_;
+  ros::WallTimer wait_timer_;  // frames whose gyro samples do not come are processed after ~gyro_wait
 };
 
 /**

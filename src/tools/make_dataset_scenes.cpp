@@ -34,6 +34,8 @@ namespace make_dataset_detail {
 
 using namespace skin3d;  // NOLINT(build/namespaces)
 
+// ------------------------------------------------------------------ workpiece
+
 namespace {
 
 /** Renders the pair once (noise-free irradiance) and writes `frames` exposures of it (realism with fresh noise
@@ -66,8 +68,6 @@ void writeRenderedExposures(const sim::Scene& scene, const sim::DatasetConfig& c
 }
 
 }  // namespace
-
-// ------------------------------------------------------------------ workpiece
 
 int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet) {
   const sim::WorkpieceConfig& w = c.workpiece;
@@ -151,6 +151,8 @@ int makeWorkpiece(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
   return 0;
 }
 
+
+// ------------------------------------------------------------------ skin
 
 namespace {
 

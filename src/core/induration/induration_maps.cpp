@@ -77,6 +77,8 @@ cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref) {
   return h;
 }
 
+namespace {
+
 /** smoothNaN of one map at several sigmas: the known mask, the zero-filled map and their reductions are made
  *  once (the adaptive smoothing tries a few sigmas on the same heights). */
 class NanSmoother {
@@ -120,6 +122,8 @@ class NanSmoother {
   cv::Mat h_, k_, v_, w_;
   std::map<int, std::pair<cv::Mat, cv::Mat>> reduced_;  // reduction factor: the zero-filled map and its weights
 };
+
+}  // namespace
 
 /** NaN-aware Gaussian smoothing (normalised convolution). A wide Gaussian (sigma > 4 px) is applied on a
  *  map reduced by a power of two f (area averages; sigma / f in [2, 4] px there) and brought back bilinearly:
@@ -195,6 +199,8 @@ double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, dou
   }
 }
 
+namespace {
+
 /**
  * Where the ray of a pixel (unit `r`, from the left camera at the origin) first meets the reference: the
  * distance along it, NaN if it misses. Along a ray every model is a quadratic in the distance (the plane and the
@@ -222,6 +228,8 @@ double rayHit(const ReferenceSurface& ref, const Eigen::Vector3d& r) {
   }
   return u * T;
 }
+
+}  // namespace
 
 /**
  * The height of a plaque's top (m): the level its height profile reaches at the centre. The heights are binned by

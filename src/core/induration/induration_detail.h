@@ -1,0 +1,98 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Private helpers of the induration measurement, shared by its files (not installed):
+//   induration_maps.cpp       height map, smoothing, detection threshold, incidence, footprints, regions;
+//   induration_reference.cpp  reference surface fits (plane, quadratic, quadric) and their alternation;
+//   induration_plaques.cpp    the plaque search;
+//   induration.cpp            options, PASI class, measureInduration.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <limits>
+#include <opencv2/core.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "skin3d/induration/induration.h"
+
+namespace skin3d {
+namespace induration {
+namespace induration_detail {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+inline bool known(const cv::Vec3f& p) { return !std::isnan(p[0]); }
+
+using Vec10 = Eigen::Matrix<double, 10, 1>;
+
+/** F(y) = monomials(y) . theta, written out (the per-pixel height calls it a few times per pixel). */
+inline double quadricValue(const Vec10& t, const Eigen::Vector3d& y) {
+  const double a = y.x(), b = y.y(), c = y.z();
+  return t(0) * a * a + t(1) * b * b + t(2) * c * c + t(3) * a * b + t(4) * a * c + t(5) * b * c + t(6) * a + t(7) * b + t(8) * c + t(9);
+}
+
+/** grad F(y) = monomialGradients(y)^T theta, written out. */
+inline Eigen::Vector3d quadricGradient(const Vec10& t, const Eigen::Vector3d& y) {
+  const double a = y.x(), b = y.y(), c = y.z();
+  return Eigen::Vector3d(2 * t(0) * a + t(3) * b + t(4) * c + t(6), 2 * t(1) * b + t(3) * a + t(5) * c + t(7),
+                         2 * t(2) * c + t(4) * a + t(5) * b + t(8));
+}
+
+/** What the measurement works on: the cloud with its outliers removed, and where it is known. */
+struct Surface {
+  const stereo::DenseCloud& cloud;
+  const IndurationOptions& o;
+  cv::Mat xyz;
+  cv::Mat known_mask;
+  int known_points = 0;
+};
+
+/** The reference fitted to one model by alternation, with its plaque mask and healthy-skin scale. */
+struct Alternation {
+  ReferenceSurface ref;
+  cv::Mat plaque_mask;
+  double healthy_fraction = 1.0, scale = std::numeric_limits<double>::infinity();
+  double smoothing = 0;  // px: segmentation smoothing chosen for this model's heights
+  cv::Mat band;          // the working band under this model's first fit
+  bool ok = false;
+};
+
+/** The footprint of a plaque's region (measuredFootprint). */
+struct Footprint {
+  cv::Mat pixels;       //!< CV_8U in the region's box
+  double open = 0;      //!< share of the pixels just outside it that are unmeasured and not a step edge's gap
+};
+
+// ---- induration_maps.cpp (each documented there)
+int removeOutliers(cv::Mat& xyz, double std_ratio);
+cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref);
+cv::Mat smoothNaN(const cv::Mat& h, double sigma);
+cv::Mat smoothFilled(const cv::Mat& h, double sigma, double gap_px);
+cv::Mat footprint(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Rect& rect);
+double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_height, double band);
+double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, double limit, double min_height, double band,
+                         cv::Mat* smoothed);
+double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin);
+cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre);
+cv::Mat workingBand(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre, double max_deg);
+cv::Mat holesOf(const cv::Mat& mask);
+Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::Mat& known, const cv::Mat& h, double edge, int max_gap);
+cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area);
+
+// ---- induration_reference.cpp
+/** The starting plane: RANSAC on a subsample of about 20000 points (normal towards the camera side). */
+bool ransacStart(const Surface& s, ReferenceSurface* ref);
+/** The reference: "auto" alternates the plane and the quadric and keeps the quadric only if it fits the healthy
+ *  skin clearly better; otherwise the model asked for. `candidates`: each model tried with its scale. */
+Alternation chooseReference(const Surface& s, const ReferenceSurface& start,
+                            std::vector<std::pair<std::string, double>>* candidates);
+
+// ---- induration_plaques.cpp
+/** The plaques (PlaqueSearch): into res.plaques, res.labels and res.warnings. */
+void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
+                 double smoothing, IndurationResult& res);
+
+}  // namespace induration_detail
+}  // namespace induration
+}  // namespace skin3d

@@ -1,0 +1,394 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Induration measurement: the plaque search. See include/skin3d/induration/induration.h.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <opencv2/imgproc.hpp>
+
+#include "../common/text.h"
+#include "induration_detail.h"
+
+namespace skin3d {
+namespace induration {
+namespace induration_detail {
+
+using common::num;
+
+namespace {
+
+/** A plaque whose outline borders unmeasured skin along more than this share may extend beyond what was
+ *  measured: a warning says so. */
+constexpr double kOpenOutline = 0.1;
+
+/** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
+struct PlaqueSums {
+  double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  std::vector<float> hk;  // interior heights
+  int px = 0, nc = 0;     // footprint pixels, pixels with a height
+};
+
+/** "N px at pixel (x, y)": where a region was, for the warnings. */
+std::string atPixel(const cv::Rect& box) {
+  return "pixel (" + std::to_string(box.x + box.width / 2) + ", " + std::to_string(box.y + box.height / 2) + ")";
+}
+
+/**
+ * The plaques: regions above the detection threshold in the working band, each re-drawn from its core at
+ * edge_fraction of its median height, measured, and checked (surroundings known, not too high, enough heights).
+ */
+class PlaqueSearch {
+ public:
+  PlaqueSearch(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
+               double smoothing, IndurationResult& res)
+      : s_(s), o_(s.o), hs_(hs), reach_(reach), threshold_(threshold), smoothing_(smoothing), res_(res) {
+    // A plaque cut by a narrow unknown or low strip (a step edge the matcher could not follow, a line of noise)
+    // is one plaque: regions closer than about one interior margin are joined (closing) before labelling.
+    const int jr = (o_.interior_margin_px + 1) / 2;
+    join_ = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * jr + 1, 2 * jr + 1));
+    off_band_ = s.known_mask & ~band;  // measured, but seen too obliquely
+    cv::Mat above = (hs > threshold) & band, cents;
+    if (o_.interior_margin_px > 0) {
+      cv::morphologyEx(above, above, cv::MORPH_CLOSE, join_);
+      above.setTo(0, off_band_);
+    }
+    n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
+    final_labels_ = cv::Mat(s.xyz.size(), CV_32S, cv::Scalar(0));
+  }
+
+  /** Draws every core, largest first: a plaque whose core the matcher cut in two (an occlusion shadow across it)
+   *  is drawn from its larger piece, and the smaller piece, already inside it, is skipped. Then the ids by
+   *  decreasing area, the labels, and the warnings of the regions ignored. */
+  void run() {
+    std::vector<int> cores(std::max(0, n_ - 1));
+    std::iota(cores.begin(), cores.end(), 1);
+    std::stable_sort(cores.begin(), cores.end(),
+                     [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
+    for (const int k : cores) drawCore(k);
+    renumberByArea();
+    warnIgnored();
+  }
+
+ private:
+  /** Core k's plaque, if it is one. */
+  void drawCore(int k) {
+    const cv::Rect bb(stats_.at<int>(k, cv::CC_STAT_LEFT), stats_.at<int>(k, cv::CC_STAT_TOP),
+                      stats_.at<int>(k, cv::CC_STAT_WIDTH), stats_.at<int>(k, cv::CC_STAT_HEIGHT));
+    if (takenAlready(k, bb)) return;  // part of a plaque drawn already
+    double edge = 0, ceiling = 0;
+    if (!coreLevels(k, bb, &edge, &ceiling)) return;
+    cv::Rect box;
+    cv::Mat mask;
+    growRegion(k, bb, edge, ceiling, &box, &mask);
+    if (isShoulder(k, bb, edge, box)) return;
+    // statistics: area and centroid over the whole plaque; heights over its interior (the plaque eroded by
+    // interior_margin_px: the matching window blurs the edge into a ramp, which would pull the mean down)
+    // footprints on the reference's tangent plane at the region (the plane itself for the plane model)
+    const ReferenceSurface local = localPlane(box, mask);
+    const cv::Mat A = footprint(s_.cloud.ray, local, box);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (final_labels_.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // a few pixels of a neighbour
+    // area, share measured, volume, label and the top's profile over the footprint the measurements support
+    // (mean, max, std: the region's interior, as before)
+    const Footprint foot =
+        measuredFootprint(mask, box, s_.known_mask, res_.height_map, edge, 4 * std::max(1, o_.interior_margin_px));
+    PlaqueSums sums = accumulate(box, mask, foot.pixels, A, local);
+    if (sums.area < o_.min_area || sums.hk.size() < 10) return;
+    if (atEdgeOrTooHigh(box, mask, sums)) return;
+    if (sums.nc < o_.min_measured_share * sums.px) {
+      sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+                                        num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
+      return;
+    }
+    addPlaque(box, foot, sums);
+  }
+
+  /** True when at least half of core k lies in a plaque drawn already. */
+  bool takenAlready(int k, const cv::Rect& bb) const {
+    int in_core = 0, taken = 0;
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab_.at<int>(y, x) == k) {
+          ++in_core;
+          taken += final_labels_.at<int>(y, x) != 0;
+        }
+    return 2 * taken >= in_core;
+  }
+
+  /** The core's edge level (edge_fraction of its median height, at least the threshold) and its ceiling; false
+   *  when the core has under 10 heights. */
+  bool coreLevels(int k, const cv::Rect& bb, double* edge, double* ceiling) const {
+    std::vector<float> hv;
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab_.at<int>(y, x) == k && !std::isnan(res_.height_map.at<float>(y, x))) hv.push_back(res_.height_map.at<float>(y, x));
+    if (hv.size() < 10) return false;
+    std::nth_element(hv.begin(), hv.begin() + hv.size() / 2, hv.end());
+    const double median = hv[hv.size() / 2];
+    *edge = std::max(threshold_, o_.edge_fraction * median);
+    // The core holds the plaque's top: a pixel of its region far above the core's highest is another bump (a
+    // stripe of mismatches along the measured surface's edge, a neighbouring higher plaque), not this plaque.
+    std::nth_element(hv.begin(), hv.begin() + static_cast<std::ptrdiff_t>(0.99 * (hv.size() - 1)), hv.end());
+    *ceiling = 2.0 * hv[static_cast<std::size_t>(0.99 * (hv.size() - 1))] + threshold_;
+    return true;
+  }
+
+  /** The region above `edge` (and below `upper`) connected to core k, in the box. */
+  cv::Mat connected(int k, const cv::Rect& bb, double edge, const cv::Rect& box, double upper) const {
+    cv::Mat region = (hs_(box) > edge) & (hs_(box) < upper);
+    if (o_.interior_margin_px > 0) {
+      cv::morphologyEx(region, region, cv::MORPH_CLOSE, join_);
+      region.setTo(0, off_band_(box));
+    }
+    cv::Mat rl;
+    const int rn = cv::connectedComponents(region, rl, 8, CV_32S);
+    std::vector<char> keep(rn, 0);
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab_.at<int>(y, x) == k) keep[rl.at<int>(y - box.y, x - box.x)] = 1;
+    keep[0] = 0;
+    cv::Mat out = cv::Mat::zeros(box.size(), CV_8U);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (keep[rl.at<int>(y, x)]) out.at<uchar>(y, x) = 255;
+    return out;
+  }
+
+  /** The region at the edge level connected to the core, within a margin around the core's box; the margin
+   *  doubles (up to 3 times) while the region reaches the box's border inside the image: the part of a plaque
+   *  beyond its core's box (past a gap the core could not cross) must not be cut off along a straight line.
+   *  Holes (background not reachable from the box border) are filled. */
+  void growRegion(int k, const cv::Rect& bb, double edge, double ceiling, cv::Rect* box, cv::Mat* mask) const {
+    const cv::Mat& xyz = s_.xyz;
+    int m = 4 * std::max(1, static_cast<int>(std::ceil(smoothing_))) + 2 * o_.exclusion_margin_px + 2;
+    for (int grow = 0;; ++grow, m *= 2) {
+      *box = cv::Rect(bb.x - m, bb.y - m, bb.width + 2 * m, bb.height + 2 * m) & cv::Rect(0, 0, xyz.cols, xyz.rows);
+      *mask = connected(k, bb, edge, *box, ceiling);
+      const cv::Rect& b = *box;
+      const bool touches = (b.x > 0 && cv::countNonZero(mask->col(0)) > 0) || (b.y > 0 && cv::countNonZero(mask->row(0)) > 0) ||
+                           (b.x + b.width < xyz.cols && cv::countNonZero(mask->col(b.width - 1)) > 0) ||
+                           (b.y + b.height < xyz.rows && cv::countNonZero(mask->row(b.height - 1)) > 0);
+      if (!touches || grow == 3) break;
+    }
+    *mask |= holesOf(*mask);
+  }
+
+  /** A core whose half-height region reaches a plaque drawn already (from a larger core) is that plaque's
+   *  shoulder (its ramp, a step the matcher blurred, a piece past a gap): no valley below its half height
+   *  separates them, so it is not a plaque of its own. (Without the ceiling: the way up to a higher plaque is
+   *  above the core's own top.) */
+  bool isShoulder(int k, const cv::Rect& bb, double edge, const cv::Rect& box) const {
+    const cv::Mat loose = connected(k, bb, edge, box, std::numeric_limits<double>::infinity());
+    int overlap = 0;
+    for (int y = 0; y < box.height && overlap < 10; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (loose.at<uchar>(y, x) && final_labels_.at<int>(y + box.y, x + box.x) != 0) ++overlap;
+    return overlap >= 10;
+  }
+
+  /** The reference's tangent plane at the region's mean point (the reference itself unless it is a quadric). */
+  ReferenceSurface localPlane(const cv::Rect& box, const cv::Mat& mask) const {
+    const ReferenceSurface& ref = res_.reference;
+    ReferenceSurface local = ref;
+    if (ref.model != "quadric") return local;
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    int mk = 0;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (mask.at<uchar>(y, x) && known(s_.xyz.at<cv::Vec3f>(y + box.y, x + box.x))) {
+          const cv::Vec3f& q = s_.xyz.at<cv::Vec3f>(y + box.y, x + box.x);
+          m += Eigen::Vector3d(q[0], q[1], q[2]);
+          ++mk;
+        }
+    if (mk > 0) {
+      const Eigen::Vector4d tp = ref.tangentPlane(m / mk);
+      local.model = "plane";
+      local.normal = tp.head<3>();
+      local.d = tp(3);
+    }
+    return local;
+  }
+
+  /** Area over the footprint `fp`, volume and centroid over the known pixels, heights over the interior. */
+  PlaqueSums accumulate(const cv::Rect& box, const cv::Mat& mask, const cv::Mat& fp, const cv::Mat& A,
+                        const ReferenceSurface& local) const {
+    cv::Mat interior;
+    if (o_.interior_margin_px > 0) {
+      cv::erode(mask, interior,
+                cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o_.interior_margin_px + 1, 2 * o_.interior_margin_px + 1)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+      if (cv::countNonZero(interior) < 10) interior = mask;  // too small to have an interior
+    } else {
+      interior = mask;
+    }
+    PlaqueSums t;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x) {
+        if (!mask.at<uchar>(y, x)) continue;
+        const float h = res_.height_map.at<float>(y + box.y, x + box.x);
+        if (fp.at<uchar>(y, x)) {
+          ++t.px;
+          t.area += A.at<double>(y, x);
+        }
+        if (std::isnan(h)) continue;
+        t.vol += std::max(0.0f, h) * A.at<double>(y, x);
+        const cv::Vec3f& q = s_.xyz.at<cv::Vec3f>(y + box.y, x + box.x);
+        t.c += Eigen::Vector3d(q[0], q[1], q[2]);
+        ++t.nc;
+        if (!interior.at<uchar>(y, x)) continue;
+        t.hk.push_back(h);
+        t.sh += h;
+        t.sh2 += static_cast<double>(h) * h;
+        if (!s_.cloud.sigma.empty()) {
+          const float sg = s_.cloud.sigma.at<float>(y + box.y, x + box.x);
+          const cv::Vec3f& r = s_.cloud.ray.at<cv::Vec3f>(y + box.y, x + box.x);
+          const double cosi = std::fabs(local.normal.x() * r[0] + local.normal.y() * r[1] + local.normal.z() * r[2]);
+          if (std::isfinite(sg)) t.ssig2 += (sg * cosi) * (sg * cosi);
+        }
+      }
+    return t;
+  }
+
+  /** A region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an island of
+   *  mismatches): its height above the reference means nothing (listed in at_edge_); one higher than max_height
+   *  is not skin (a warning). True when the region is ignored for either reason. */
+  bool atEdgeOrTooHigh(const cv::Rect& box, const cv::Mat& mask, const PlaqueSums& t) {
+    const int r1 = 2 * o_.interior_margin_px, r2 = 4 * o_.interior_margin_px;
+    // Only the surroundings in the working band count (where the reference says the skin faces both
+    // cameras): a plaque next to the band's edge keeps its measurable side; an island beyond a silhouette,
+    // where no ray meets the reference in the band, has none. Computed in a window of the box grown by r2
+    // (the ring cannot reach further); beyond the image border counts as in the band and unknown.
+    const cv::Rect win(box.x - r2, box.y - r2, box.width + 2 * r2, box.height + 2 * r2);
+    const cv::Rect in = win & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
+    cv::Mat full = cv::Mat::zeros(win.size(), CV_8U), d1, d2;
+    cv::Mat known_pad = cv::Mat::zeros(win.size(), CV_8U), reach_pad(win.size(), CV_8U, cv::Scalar(255));
+    full(cv::Rect(r2, r2, box.width, box.height)).setTo(255, mask);
+    s_.known_mask(in).copyTo(known_pad(in - win.tl()));
+    reach_(in).copyTo(reach_pad(in - win.tl()));
+    cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
+    cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));
+    const cv::Mat ring = d2 & ~d1 & reach_pad;
+    const int ring_all = cv::countNonZero(d2 & ~d1);
+    const int ring_n = cv::countNonZero(ring), ring_known = cv::countNonZero(ring & known_pad);
+    const double mean_h = t.sh / static_cast<double>(t.hk.size());
+    if (ring_n < 0.25 * ring_all || ring_known < 0.8 * ring_n) {
+      // (in pixels: beyond a silhouette the reference's tangent plane is edge-on and an area means nothing)
+      at_edge_.emplace_back(t.px, std::to_string(t.px) + " px at " + atPixel(box) + ", " +
+                                      num(std::round(100.0 * ring_known / std::max(1, ring_n))) + " % of its surroundings known");
+      return true;
+    }
+    if (mean_h > o_.max_height) {
+      res_.warnings.push_back("a region " + num(std::round(mean_h * 1e5) / 100) + " mm above the reference at " +
+                              atPixel(box) + " was ignored: higher than max_height " + num(o_.max_height * 1e3) +
+                              " mm (not skin)");
+      return true;
+    }
+    return false;
+  }
+
+  /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
+  void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t) {
+    Plaque p;
+    const double nk = static_cast<double>(t.hk.size());
+    p.area = t.area;
+    p.centroid = t.c / std::max(1, t.nc);
+    p.mean_height = t.sh / nk;
+    p.std_height = std::sqrt(std::max(0.0, t.sh2 / nk - p.mean_height * p.mean_height));
+    std::nth_element(t.hk.begin(), t.hk.begin() + static_cast<long>(0.99 * (nk - 1)), t.hk.end());
+    p.max_height = t.hk[static_cast<std::size_t>(0.99 * (nk - 1))];
+    p.mean_height_sigma = std::sqrt(t.ssig2) / nk;
+    // the top: from the height profile; a plaque too small to have 30 heights clear of its ramp takes the 99th
+    // percentile of its interior (the mean would read its blurred ramp). The profile's distances are from the
+    // footprint's outline: where a plaque runs into unmeasured skin, the region's part in the gap would move
+    // its deepest point off the measured top (partly measured plaques of seeds 5, 8, 11: +28.5, -6.8, +10.1 um
+    // -> +21.7, -2.9, +6.4 um; seeds 9 and 10, not looked at for this: within 2 um)
+    p.top_height = topHeight(foot.pixels, res_.height_map(box), o_.interior_margin_px);
+    if (!std::isfinite(p.top_height)) p.top_height = p.max_height;
+    p.pasi_class = pasiClass(p.top_height, o_.pasi_boundaries);
+    p.pixels = t.px;
+    p.measured_fraction = t.px > 0 ? t.nc / static_cast<double>(t.px) : 0.0;
+    p.volume = p.measured_fraction > 0 ? t.vol / p.measured_fraction : 0.0;
+    p.outline_unmeasured = foot.open;
+    const std::string what = "a plaque of " + num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box);
+    if (p.measured_fraction < 0.9)
+      res_.warnings.push_back(what + " is only partly measured: " + num(std::round(100 * p.measured_fraction)) +
+                              " % of its footprint has a height (its mean and volume rest on that part)");
+    if (p.outline_unmeasured > kOpenOutline)
+      res_.warnings.push_back(what + " borders unmeasured skin along " + num(std::round(100 * p.outline_unmeasured)) +
+                              " % of its outline: it may extend there (its area is what was measured; turn the skin "
+                              "towards the rig to measure all of it)");
+    p.bbox = box;
+    p.id = static_cast<int>(plaques_.size()) + 1;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x)
+        if (foot.pixels.at<uchar>(y, x)) final_labels_.at<int>(y + box.y, x + box.x) = p.id;
+    plaques_.push_back(p);
+  }
+
+  /** ids in order of decreasing area, in the result and in its label image. */
+  void renumberByArea() {
+    std::vector<int> order(plaques_.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return plaques_[a].area > plaques_[b].area; });
+    std::vector<int> new_id(plaques_.size() + 1, 0);
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      new_id[plaques_[order[i]].id] = static_cast<int>(i) + 1;
+      res_.plaques.push_back(plaques_[order[i]]);
+      res_.plaques.back().id = static_cast<int>(i) + 1;
+    }
+    for (int y = 0; y < final_labels_.rows; ++y)
+      for (int x = 0; x < final_labels_.cols; ++x) {
+        int& l = final_labels_.at<int>(y, x);
+        if (l) l = new_id[l];
+      }
+    res_.labels = final_labels_;
+  }
+
+  /** One warning per kind of ignored region (a limb's silhouette can leave dozens), the three largest named. */
+  void warnIgnored() {
+    auto largest = [](std::vector<std::pair<double, std::string>>& v) {
+      std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+      std::string list;
+      for (size_t i = 0; i < std::min<size_t>(3, v.size()); ++i) list += (i ? "; " : "") + v[i].second;
+      return list;
+    };
+    if (!at_edge_.empty()) {
+      const std::string list = largest(at_edge_);
+      res_.warnings.push_back(at_edge_.size() == 1
+                                  ? "a raised region of " + list + " was ignored: it lies at the edge of the measured surface"
+                                  : std::to_string(at_edge_.size()) + " raised regions were ignored: they lie at the edge of the "
+                                    "measured surface (their height above the reference means nothing); the largest: " + list);
+    }
+    if (!sparse_.empty()) {
+      const std::string list = largest(sparse_);
+      res_.warnings.push_back(std::to_string(sparse_.size()) + " raised region" + (sparse_.size() == 1 ? " was" : "s were") +
+                              " ignored: under " + num(std::round(100 * o_.min_measured_share)) +
+                              " % of the footprint has a height (scattered matches, mostly where the skin turns away from "
+                              "the rig, are not a plaque); the largest: " + list);
+    }
+  }
+
+  const Surface& s_;
+  const IndurationOptions& o_;
+  const cv::Mat hs_, reach_;
+  const double threshold_, smoothing_;
+  IndurationResult& res_;
+  cv::Mat join_, off_band_, lab_, stats_, final_labels_;
+  int n_ = 0;
+  std::vector<Plaque> plaques_;
+  std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
+  std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
+};
+
+}  // namespace
+
+void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
+                 double smoothing, IndurationResult& res) {
+  PlaqueSearch(s, hs, band, reach, threshold, smoothing, res).run();
+}
+
+}  // namespace induration_detail
+}  // namespace induration
+}  // namespace skin3d

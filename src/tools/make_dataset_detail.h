@@ -1,0 +1,41 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Private helpers of make_dataset, shared by its files:
+//   make_dataset_emit.cpp    pose messages and ground-truth YAML pieces;
+//   make_dataset_globe.cpp   the globe datasets (landmarks and images);
+//   make_dataset_scenes.cpp  the rendered workpiece and skin datasets;
+//   make_dataset.cpp         the command line and main.
+#pragma once
+
+#include <geometry_msgs/PoseStamped.h>
+#include <rosbag/bag.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Geometry>
+#include <string>
+
+#include "skin3d/geometry/stereo_rig.h"
+#include "skin3d/sim/dataset.h"
+
+namespace make_dataset_detail {
+
+inline const std::string kLeftFrame = "stereo_left_optical_frame";
+inline const std::string kRightFrame = "stereo_right_optical_frame";
+inline const std::string kWorldFrame = "world";
+inline ros::Time g_start(1000.0);  // the first stamp (--start): a fixed, valid ROS time, so that bags are deterministic
+
+// ---- make_dataset_emit.cpp
+geometry_msgs::PoseStamped poseMsg(const Eigen::Isometry3d& T, const ros::Time& t);
+void emitVec(YAML::Emitter& e, const Eigen::VectorXd& v);
+void emitRig(YAML::Emitter& e, const char* name, const skin3d::geometry::StereoRig& rig);
+void emitRealism(YAML::Emitter& e, const skin3d::sim::DatasetConfig& c, const skin3d::sim::PerturbedCalibration& p);
+/** Pose of the right optical frame in the left one (left <- right). */
+Eigen::Isometry3d poseLeftRight(const skin3d::geometry::StereoRig& rig);
+
+// ---- make_dataset_globe.cpp and make_dataset_scenes.cpp: one dataset kind each into `bag` and `truth`
+int makeGlobe(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
+              const std::string& map_path);
+int makeWorkpiece(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet);
+int makeSkin(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
+             const std::string& visible_path);
+
+}  // namespace make_dataset_detail

@@ -3,7 +3,7 @@
 """
 usage: check_layout.py [--root DIR] [--xunit FILE.xml] [--self-test]
 
-The house rules of issue 17, read from the source tree (text only, nothing is built):
+The house rules of the source tree, read from the source tree (text only, nothing is built):
   - no file under src/nodelets includes a file under src/tools, and no tool includes a nodelet file
     (what both need lives in skin3d_ros, include/skin3d/ros/, or in the core);
   - every nodelet file is at most 250 lines;

@@ -9,7 +9,10 @@ The house rules of the source tree, read from the source tree (text only, nothin
   - every nodelet file is at most 250 lines;
   - no function in src/ (or bench/) is longer than 150 lines (from the line of its opening brace's statement to its
     closing brace; lambdas count in the function that holds them);
-  - the core and the simulator (src/core, include/skin3d/ except ros/) include no ROS header.
+  - the core and the simulator (src/core, include/skin3d/ except ros/) include no ROS header;
+  - the Python code is the package src/skin3d/ (catkin_python_setup, setup.py): it has an __init__.py, no msg/ or
+    srv/ of its own (catkin generates skin3d.msg / skin3d.srv beside it) and no C++; no other .py under src/; the
+    Python scripts and the package import it as a package, never through sys.path (tests may import their helpers).
 (That the measurement libraries do not link the simulator is enforced by the build: -Wl,--no-undefined.)
 --xunit writes one JUnit test case per rule (scripts/test counts them). Exit status 1 when a rule is broken.
 --self-test first checks the function measure on small known snippets.
@@ -169,7 +172,29 @@ def check(root):
                 if ROS_HEADERS.match(l.strip()):
                     ros.append("%s:%d %s" % (rel(root, p), k, l.strip()))
     results.append(("core_without_ros", "; ".join(ros)))
+    # 5. the Python package
+    results.append(("python_package", "; ".join(python_package_problems(root))))
     return results
+
+
+def python_package_problems(root):
+    bad = []
+    pkg = os.path.join(root, "src", "skin3d")
+    if not os.path.isfile(os.path.join(pkg, "__init__.py")):
+        bad.append("src/skin3d/__init__.py is missing (the Python package of setup.py)")
+    for sub in ("msg", "srv"):
+        if os.path.exists(os.path.join(pkg, sub)):
+            bad.append("src/skin3d/%s would hide the generated skin3d.%s" % (sub, sub))
+    bad += ["%s: C++ in the Python package" % rel(root, p) for p in files(root, "src/skin3d")]
+    for p in files(root, "src", (".py",)):
+        if not os.path.abspath(p).startswith(pkg + os.sep):
+            bad.append("%s: Python outside the package src/skin3d/" % rel(root, p))
+    sources = list(files(root, "src/skin3d", (".py",))) + list(files(root, "scripts", (".py",)))
+    for p in sources:
+        for k, l in enumerate(open(p, encoding="utf-8"), 1):
+            if re.search(r"\bsys\.path\.(insert|append)\(|\bsys\.path\s*(\+?=|\[)", l.split("#")[0]):
+                bad.append("%s:%d changes sys.path (import the package skin3d instead)" % (rel(root, p), k))
+    return bad
 
 
 def self_test():

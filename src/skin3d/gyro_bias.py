@@ -27,7 +27,6 @@ The topic is imu/data under the root or under one namespace (as process_bag find
 """
 import argparse
 import math
-import os
 import sys
 
 import numpy as np

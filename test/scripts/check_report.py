@@ -15,7 +15,6 @@ generator's truth (never against the plotting code's own output):
 - the filter's 3-sigma bounds drawn in Fig. 7.1 come from rig_covariance.csv and contain most of the errors;
 - the workpiece table matches the truth's plateaus.
 """
-import os
 import re
 import sys
 

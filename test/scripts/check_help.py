@@ -31,7 +31,8 @@ def user_scripts():
 
 
 def snapshot(dirs):
-    """name -> (size, mtime) of every entry directly in dirs, and of everything below the scratch directory."""
+    """path -> (size, mtime) of every file directly in dirs, None for a directory (whose mtime the build and git
+    change on their own: a new directory such as results/ still shows as a new entry)."""
     out = {}
     for d in dirs:
         for name in os.listdir(d):
@@ -40,7 +41,7 @@ def snapshot(dirs):
                 st = os.stat(p)
             except OSError:
                 continue
-            out[p] = (st.st_size if not os.path.isdir(p) else 0, st.st_mtime_ns)
+            out[p] = None if os.path.isdir(p) else (st.st_size, st.st_mtime_ns)
     return out
 
 
@@ -62,7 +63,7 @@ def help_check(script, flag, scratch):
         r = run(cmd, scratch)
     except subprocess.TimeoutExpired:
         return "%s %s did not finish within 60 s (it does more than print its usage)" % (script, flag)
-    changed = sorted(p for p, v in snapshot(WATCHED).items() if before.get(p) != v)
+    changed = sorted(p for p, v in snapshot(WATCHED).items() if p not in before or before[p] != v)
     created = tree(scratch)
     problems = []
     if r.returncode != 0:

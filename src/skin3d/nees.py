@@ -142,7 +142,7 @@ def run_nees(d, calibrated_frame=False):
 
 def main(argv=None):
     """The command (scripts/slam_nees.py): argv without the program name; returns the exit code."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("dirs", nargs="+", metavar="RESULTS_DIR")
     ap.add_argument("--confidence", type=float, default=0.95)
     ap.add_argument("--min-inside", type=float, default=0.9)

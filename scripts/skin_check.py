@@ -10,7 +10,7 @@ Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence b
 and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
 top height and its error, the measured mean over the interior and over the footprint (volume / area), PASI class
 (measured/true), area and measured share; then a summary line over the plaques of
-at least 0.1 mm in the working band (the ones issue 15 requires).
+at least 0.1 mm in the working band (the ones the instrument must measure).
 """
 import os
 import sys
@@ -20,11 +20,16 @@ import numpy as np
 import yaml
 
 
-def main():
-    if len(sys.argv) != 3:
-        sys.exit(__doc__)
-    stem = os.path.splitext(sys.argv[1])[0]
-    out = sys.argv[2]
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if "-h" in argv or "--help" in argv:
+        print(__doc__)
+        return 0
+    if len(argv) != 2:
+        print(__doc__, file=sys.stderr)
+        return 2
+    stem = os.path.splitext(argv[0])[0]
+    out = argv[1]
     for f in (stem + ".truth.yaml", stem + ".visible.png", out + "/induration.yaml", out + "/disparity.tiff"):
         if not os.path.exists(f):
             sys.exit("skin_check: no '%s'" % f)
@@ -97,4 +102,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -4,7 +4,8 @@
 Usage: test_summary.py RESULTS_DIR
 Prints each failed or errored test case, then the closing line
 ``N passed, N failed[, N skipped]``. Exit status 1 when anything failed or
-no test ran at all, else 0. A rostest launch contributes its wrapper case
+no test ran at all (also when RESULTS_DIR does not exist), else 0;
+2 on a bad command line. A rostest launch contributes its wrapper case
 (the launch itself) besides the gtest cases of its test node.
 """
 import glob
@@ -13,11 +14,20 @@ import sys
 import xml.etree.ElementTree as ET
 
 
-def main():
-    if len(sys.argv) != 2:
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if "-h" in argv or "--help" in argv:
+        print(__doc__)
+        return 0
+    if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
-    root = sys.argv[1]
+    root = argv[0]
+    if not os.path.isdir(root):
+        print(f"test_summary: no directory '{root}' (no test ran, or the tests wrote their results elsewhere)",
+              file=sys.stderr)
+        print("0 passed, 1 failed")
+        return 1
     files = sorted(glob.glob(os.path.join(root, "**", "*.xml"), recursive=True))
     passed = failed = skipped = 0
     for path in files:

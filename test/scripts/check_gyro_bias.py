@@ -24,7 +24,7 @@ from xunit import run_checks  # noqa: E402
 
 SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts", "gyro_bias.py")
 NOISE = 0.002
-BIAS = np.array([0.0012, -0.0004, 0.08])  # one axis as large as real recordings show (issue 18)
+BIAS = np.array([0.0012, -0.0004, 0.08])  # one axis as large as real recordings show
 
 
 def write_bag(path, seconds, rate=lambda t: np.zeros(3), image_shift_px=0.0, images=True, ns="", imu=True, seed=1):

@@ -6,13 +6,16 @@ usage: check_layout.py [--root DIR] [--xunit FILE.xml] [--self-test]
 The house rules, read from the source tree (text only, nothing is built):
   - no file under src/nodelets includes a file under src/tools, and no tool includes a nodelet file
     (what both need lives in skin3d_ros, include/skin3d/ros/, or in the core);
-  - every nodelet file is at most 250 lines;
+  - every nodelet file is at most 60 lines (a nodelet only constructs its runner in src/ros);
   - no C++ file in src/ or include/ is longer than 700 lines;
   - no function in src/, include/ (or bench/) has a body longer than 150 lines (from its opening brace to the
     matching closing brace, both lines counted; comments, string and character literals do not take part in the
     matching; lambdas and local classes count in the function that holds them; a member function defined in a
     class body is a function, the class body and a namespace are not);
   - the core and the simulator (src/core, include/skin3d/ except ros/) include no ROS header.
+  - the Python code is the package src/skin3d/ (catkin_python_setup, setup.py): it has an __init__.py, no msg/ or
+    srv/ of its own (catkin generates skin3d.msg / skin3d.srv beside it) and no C++; no other .py under src/; the
+    Python scripts and the package import it as a package, never through sys.path (tests may import their helpers).
 (That the measurement libraries do not link the simulator is enforced by the build: -Wl,--no-undefined.)
 --xunit writes one JUnit test case per rule (scripts/test counts them). Exit status 1 when a rule is broken.
 --self-test first checks the function measure on small known snippets, and that the file and function length
@@ -27,7 +30,7 @@ import tempfile
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from xunit import write_xunit  # noqa: E402
 
-MAX_NODELET_LINES = 250
+MAX_NODELET_LINES = 60
 MAX_FUNCTION_LINES = 150
 MAX_FILE_LINES = 700
 CPP_EXTS = (".cpp", ".cc", ".cxx", ".h", ".hpp", ".hh")
@@ -213,7 +216,7 @@ def check(root):
                         and not os.path.exists(os.path.join(os.path.dirname(p), m.group(1))):
                     bad.append("%s:%d includes %s (a file of src/%s)" % (rel(root, p), k, m.group(1), other))
     results.append(("nodelets_and_tools_apart", "; ".join(bad)))
-    # 2. nodelet files at most 250 lines
+    # 2. nodelet files at most 60 lines
     long_files = []
     for p in files(root, "src/nodelets"):
         n = sum(1 for _ in open(p, encoding="utf-8"))
@@ -232,7 +235,29 @@ def check(root):
                 if ROS_HEADERS.match(l.strip()):
                     ros.append("%s:%d %s" % (rel(root, p), k, l.strip()))
     results.append(("core_without_ros", "; ".join(ros)))
+    # 5. the Python package
+    results.append(("python_package", "; ".join(python_package_problems(root))))
     return results
+
+
+def python_package_problems(root):
+    bad = []
+    pkg = os.path.join(root, "src", "skin3d")
+    if not os.path.isfile(os.path.join(pkg, "__init__.py")):
+        bad.append("src/skin3d/__init__.py is missing (the Python package of setup.py)")
+    for sub in ("msg", "srv"):
+        if os.path.exists(os.path.join(pkg, sub)):
+            bad.append("src/skin3d/%s would hide the generated skin3d.%s" % (sub, sub))
+    bad += ["%s: C++ in the Python package" % rel(root, p) for p in files(root, "src/skin3d")]
+    for p in files(root, "src", (".py",)):
+        if not os.path.abspath(p).startswith(pkg + os.sep):
+            bad.append("%s: Python outside the package src/skin3d/" % rel(root, p))
+    sources = list(files(root, "src/skin3d", (".py",))) + list(files(root, "scripts", (".py",)))
+    for p in sources:
+        for k, l in enumerate(open(p, encoding="utf-8"), 1):
+            if re.search(r"\bsys\.path\.(insert|append)\(|\bsys\.path\s*(\+?=|\[)", l.split("#")[0]):
+                bad.append("%s:%d changes sys.path (import the package skin3d instead)" % (rel(root, p), k))
+    return bad
 
 
 def self_test():

@@ -14,8 +14,9 @@ collects what the project starts:
     with a small quote-aware scanner), every absolute /usr/bin or /bin path named in scripts, tests, launch and
     CMake files, the commands that Python scripts run through subprocess, and the first word of the literal
     commands that C++ tests and tools pass to system() / popen();
-  - every module that the Python scripts and test nodes import (scripts/*.py, test/**/*.py), the standard
-    library and the project's own modules (and its generated messages) aside;
+  - every module that the Python package, scripts and test nodes import (src/skin3d/*.py, scripts/*.py,
+    test/**/*.py), the standard library and the project's own modules (the package skin3d, with its generated
+    messages) aside;
 finds the file each one is (roslib for nodes, /usr/bin:/bin:/usr/sbin:/sbin for commands, importlib for modules),
 asks dpkg which Debian package owns that file, and requires that package to be in the closure of the list:
 the listed packages, everything they depend on (apt-cache depends --recurse; Depends and Pre-Depends, every
@@ -334,6 +335,7 @@ def command_items(root, builtins):
     scan = (glob.glob(os.path.join(root, "scripts", "*")) + glob.glob(os.path.join(root, "test", "**", "*"), recursive=True) +
             glob.glob(os.path.join(root, "src", "**", "*.cpp"), recursive=True) +
             glob.glob(os.path.join(root, "src", "**", "*.h"), recursive=True) +
+            glob.glob(os.path.join(root, "src", "**", "*.py"), recursive=True) +
             glob.glob(os.path.join(root, "launch", "*")) + [os.path.join(root, "CMakeLists.txt")])
     for p in sorted(set(scan)):
         if not os.path.isfile(p) or p.endswith(("check_packages.py", ".png", ".yaml", ".md")):
@@ -354,9 +356,12 @@ def command_items(root, builtins):
 
 def python_items(root):
     items = []
-    files = sorted(glob.glob(os.path.join(root, "scripts", "*.py")) +
+    files = sorted(glob.glob(os.path.join(root, "src", "skin3d", "**", "*.py"), recursive=True) +
+                   glob.glob(os.path.join(root, "scripts", "*.py")) +
                    glob.glob(os.path.join(root, "test", "**", "*.py"), recursive=True))
-    local = {os.path.splitext(os.path.basename(p))[0] for p in files} | {"skin3d"}  # skin3d: the generated messages
+    # skin3d: the package src/skin3d and the generated messages; the others: test helpers beside their tests
+    local = {os.path.splitext(os.path.basename(p))[0] for p in files
+             if not os.path.relpath(p, root).startswith("src" + os.sep)} | {"skin3d"}
     for p in files:
         rel = os.path.relpath(p, root)
         with open(p) as f:

@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 # SPDX-License-Identifier: BSD-3-Clause
-"""Checks of scripts/report.py and scripts/skin3d_plots.py on real results directories (test_reports runs it).
+"""Checks of scripts/report.py and scripts/skin3d_plots.py (skin3d.report, skin3d.plots) on real results
+directories (test_reports runs it).
 
 usage: check_report.py REPORT.html SLAM_DIR_NO_GYRO SLAM_DIR_GYRO INDURATION_DIR
 
@@ -14,14 +15,12 @@ generator's truth (never against the plotting code's own output):
 - the filter's 3-sigma bounds drawn in Fig. 7.1 come from rig_covariance.csv and contain most of the errors;
 - the workpiece table matches the truth's plateaus.
 """
-import os
 import re
 import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
-import skin3d_plots as sp  # noqa: E402
+from skin3d import plots as sp  # the devel space's PYTHONPATH (source build/devel/setup.bash; run_tests has it)
 
 failures = []
 

@@ -28,13 +28,13 @@ std::string getSlamOption(const SlamOptions& options, const std::string& key);
 void setSlamOption(SlamOptions* options, const std::string& key, const std::string& value);
 
 /** @brief What a run whose measurements come through the stereo image front end sets over config/slam.yaml
- *  (process_bag with image input; rig.launch and replay_globe.launch images:=true load the same keys from
- *  config/slam_frontend.yaml, and test_slam_system checks that the file and this list agree):
+ *  (process_bag with image input, and the eskf_slam nodelet with ~front_end set, as rig.launch and
+ *  replay_globe.launch images:=true do; this list is the model's one statement):
  *  - the front end's measurement model: its errors are correlated over frames (a feature keeps most of its
  *    localisation error, and the calibration's small non-rigid error, from one frame to the next), so only
  *    measurement_white_fraction = 0.1 of each covariance is white and the rest is the landmark random walk
  *    landmark_walk_{x,y,z} (m per sqrt(s) along the camera's axes, the same for every landmark); values from
- *    the front end's tracks on two exact-calibration renders (seeds 1, 2; see config/slam_frontend.yaml);
+ *    the front end's tracks on two exact-calibration renders (seeds 1, 2; docs/slam.md);
  *  - for binary descriptors (features other than "kaze": AKAZE, ORB, one float 0/1 per bit, L2 = sqrt(Hamming)),
  *    max_descriptor_distance 5.5 (Hamming <= 30): slam.yaml's 0.3 is for KAZE's unit-norm floats.
  *  Returns (key, value) pairs in the order to apply them; config files and --set given by the user win. */

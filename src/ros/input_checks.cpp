@@ -120,7 +120,7 @@ const std::vector<std::string>& acceptedImageEncodings() {
   return e;
 }
 
-InputFault checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, bool compare_frame_id) {
+InputFault checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, FrameIdCheck frame_id) {
   if (img.width == 0 || img.height == 0 || img.data.empty())
     return {"empty image", std::to_string(img.width) + "x" + std::to_string(img.height) + ", " +
                                std::to_string(img.data.size()) + " bytes"};
@@ -140,7 +140,7 @@ InputFault checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraIn
     return {"image size differs from its camera_info's",
             "image " + std::to_string(img.width) + "x" + std::to_string(img.height) + ", camera_info " +
                 std::to_string(info->width) + "x" + std::to_string(info->height)};
-  if (info && compare_frame_id && !info->header.frame_id.empty() && !img.header.frame_id.empty() &&
+  if (info && frame_id == FrameIdCheck::kCompare && !info->header.frame_id.empty() && !img.header.frame_id.empty() &&
       img.header.frame_id != info->header.frame_id)
     return {"image frame_id differs from its camera_info's",
             "'" + img.header.frame_id + "' vs '" + info->header.frame_id + "'"};

@@ -107,8 +107,8 @@ bool StereoPairs::next(sensor_msgs::Image::ConstPtr* left, sensor_msgs::Image::C
       pending_r_.erase(ri);
       continue;
     }
-    const auto fl = ros_conv::checkImage(*li->second, &info_msg_l_, false);
-    const auto fr = ros_conv::checkImage(*ri->second, &info_msg_r_, false);
+    const auto fl = ros_conv::checkImage(*li->second, &info_msg_l_, ros_conv::FrameIdCheck::kIgnore);
+    const auto fr = ros_conv::checkImage(*ri->second, &info_msg_r_, ros_conv::FrameIdCheck::kIgnore);
     if (fl || fr) {
       if (fl) drop(topic_l_, li->first, fl.fault, fl.detail);
       else drop(topic_l_, li->first, "no usable right image with this stamp");

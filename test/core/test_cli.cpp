@@ -30,6 +30,7 @@ std::string messageOf(const std::function<void()>& f) {
 fs::path scratch(const std::string& name) {
   const fs::path p = fs::temp_directory_path() / ("skin3d_test_cli_" + std::to_string(::getpid())) / name;
   fs::remove_all(p);
+  fs::create_directories(p.parent_path());
   return p;
 }
 }  // namespace

@@ -76,13 +76,15 @@ Eigen::Matrix3d gyroCovariance(const sensor_msgs::Imu& m);
 
 /**
  * @brief Whether an image can be converted by toMono8 (see the file comment for the encodings), and, with
- * `info`, whether it fits the camera_info of its camera (its size; its frame_id too unless !compare_frame_id:
- * offline readers pair by topic and do not need equal frame_ids). Faults: "empty image", "unsupported encoding",
+ * `info`, whether it fits the camera_info of its camera (its size; its frame_id too unless FrameIdCheck::kIgnore:
+ * offline readers pair by topic and do not need equal frame_ids). (An enum, not a bool, so that the older
+ * checkImage(img, info, "topic") of conversions.h is never taken for this one.) Faults: "empty image", "unsupported encoding",
  * "image step smaller than a row", "image data shorter than step x height", "image size differs from its
  * camera_info's", "image frame_id differs from its camera_info's".
  */
+enum class FrameIdCheck { kCompare, kIgnore };
 InputFault checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info = nullptr,
-                      bool compare_frame_id = true);
+                      FrameIdCheck frame_id = FrameIdCheck::kCompare);
 
 /** @brief The image encodings toMono8 converts (as written in messages). */
 const std::vector<std::string>& acceptedImageEncodings();

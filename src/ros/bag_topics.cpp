@@ -102,7 +102,7 @@ std::string describeBagError(const std::string& path, const std::string& what) {
   if (lower.find("version") != std::string::npos && lower.find("unsupported") == std::string::npos &&
       lower.find("index") == std::string::npos)
     out += " (not a ROS 1 bag?)";
-  if (truncated)
+  if (truncated && lower.find("version") == std::string::npos)  // a version-line error: not a bag at all
     out += ". A recording that was cut off (killed recorder, full disk, partial copy) has no index: `rosbag reindex " +
            path + "` rebuilds it (keeping the original as " + p.stem().string() + ".orig.bag), then run again";
   return out;

@@ -41,6 +41,7 @@ SOURCE = os.path.normpath(os.path.join(HERE, "..", ".."))
 GLOBE = "globe_images_10.bag"      # 10 frames at 1000.0 + 0.1 k s, imu/data at 100 Hz, camera_info per frame
 WORKPIECE = "workpiece_quarter.bag"  # 2 frames
 GLOBE_FRAMES, WORKPIECE_FRAMES = 10, 2
+FRAME_PERIOD = {GLOBE: 0.1, WORKPIECE: 0.5}  # s; both start at 1000 s
 L_IMG, R_IMG = "stereo/left/image_raw", "stereo/right/image_raw"
 L_INFO, R_INFO = "stereo/left/camera_info", "stereo/right/camera_info"
 IMU = "imu/data"
@@ -49,8 +50,8 @@ NAN, INF = float("nan"), float("inf")
 
 # ---------------------------------------------------------------- bag editing
 
-def frame_stamp(k):
-    return 1000.0 + 0.1 * k
+def frame_stamp(k, base=GLOBE):
+    return 1000.0 + FRAME_PERIOD[base] * k
 
 
 def stamp_text(t):
@@ -126,7 +127,8 @@ def crop_width(px):
 def set_stamp(sec):
     def fn(msg):
         import rospy
-        msg.header.stamp = rospy.Time.from_sec(sec)
+        ns = int(round(sec * 1e9))  # exact: from_sec would round 1000.4 to 1000.399999999
+        msg.header.stamp = rospy.Time(ns // 1000000000, ns % 1000000000)
     return fn
 
 
@@ -257,7 +259,7 @@ def cases():
              stderr=dropped(R_IMG, frame_stamp(9), "no left image"), results=["no left image"]),
         Case("missing_right_image_induration", "frame 1 has no right image, --induration", defect="g",
              base=WORKPIECE, mode="induration", edit=on(R_IMG, 1, lambda m: False), frames=1,
-             stderr=dropped(L_IMG, frame_stamp(1), "no right image"), results=["no right image"]),
+             stderr=dropped(L_IMG, frame_stamp(1, WORKPIECE), "no right image"), results=["no right image"]),
         # stamps
         Case("backwards_stamps", "frame 5 stamped before frame 4: dropped",
              edit=chain(on(L_IMG, 5, set_stamp(1000.25)), on(R_IMG, 5, set_stamp(1000.25))), frames=G - 1,
@@ -453,6 +455,7 @@ def main():
                     msg = "the check itself failed: %r" % e
                 results.append(("%s.%s" % (door.name, c.name), msg))
                 print("bad_input: %s.%s: %s" % (door.name, c.name, "FAIL: " + msg if msg else "ok"), flush=True)
+                sys.stdout.flush()
     finally:
         if not a.keep:
             shutil.rmtree(tmp, ignore_errors=True)

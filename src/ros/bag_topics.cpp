@@ -6,6 +6,8 @@
 #include <rosbag/view.h>
 
 #include <algorithm>
+#include <cctype>
+#include <filesystem>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -83,11 +85,34 @@ TopicResolution resolveTopics(const std::vector<std::string>& stored, const std:
   return r;
 }
 
+std::string describeBagError(const std::string& path, const std::string& what) {
+  std::error_code ec;
+  const std::filesystem::path p(path);
+  if (!std::filesystem::exists(p, ec)) return "no such file";
+  if (std::filesystem::is_directory(p, ec)) return "it is a directory";
+  const auto size = std::filesystem::file_size(p, ec);
+  if (!ec && size == 0) return "the file is empty (0 bytes)";
+  std::string lower = what;
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::string out = what;
+  const bool truncated = lower.find("unindexed") != std::string::npos || lower.find("index") != std::string::npos ||
+                         lower.find("reading") != std::string::npos || lower.find("read ") != std::string::npos ||
+                         lower.find("chunk") != std::string::npos || lower.find("truncat") != std::string::npos ||
+                         lower.find("eof") != std::string::npos || lower.find("end of file") != std::string::npos;
+  if (lower.find("version") != std::string::npos && lower.find("unsupported") == std::string::npos &&
+      lower.find("index") == std::string::npos)
+    out += " (not a ROS 1 bag?)";
+  if (truncated && lower.find("version") == std::string::npos)  // a version-line error: not a bag at all
+    out += ". A recording that was cut off (killed recorder, full disk, partial copy) has no index: `rosbag reindex " +
+           path + "` rebuilds it (keeping the original as " + p.stem().string() + ".orig.bag), then run again";
+  return out;
+}
+
 void openForReading(rosbag::Bag* bag, const std::string& path) {
   try {
     bag->open(path, rosbag::bagmode::Read);
   } catch (const std::exception& e) {
-    throw std::invalid_argument("cannot open bag '" + path + "': " + e.what());
+    throw std::invalid_argument("cannot open bag '" + path + "': " + describeBagError(path, e.what()));
   }
 }
 

@@ -86,34 +86,29 @@ skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eigen::Mat
 }
 
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& m, const std::string& topic) {
-  if (m.K[0] == 0.0) return topic + ": uncalibrated camera_info (K[0] = 0)";
-  if (m.P[0] == 0.0) return topic + ": camera_info has no projection matrix (P[0] = 0)";
-  if (m.width == 0 || m.height == 0) return topic + ": camera_info has no image size";
-  if (!m.D.empty() && m.distortion_model != "plumb_bob" && m.distortion_model != "rational_polynomial")
-    return topic + ": unsupported distortion_model '" + m.distortion_model + "' (plumb_bob expected)";
-  return "";
+  const InputFault f = checkCameraInfo(m);
+  return f ? topic + ": " + f.text() : std::string();
 }
 
 std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, const std::string& topic) {
-  namespace enc = sensor_msgs::image_encodings;
-  if (img.width == 0 || img.height == 0 || img.data.empty()) return topic + ": empty image";
-  if (img.encoding != enc::MONO8 && img.encoding != enc::BGR8 && img.encoding != enc::RGB8 &&
-      img.encoding != enc::MONO16 && img.encoding != enc::BGRA8 && img.encoding != enc::RGBA8)
-    return topic + ": unsupported encoding '" + img.encoding + "' (mono8, mono16, bgr8, rgb8, bgra8, rgba8)";
-  if (img.step * img.height > img.data.size()) return topic + ": image data shorter than step x height";
-  if (info && (img.width != info->width || img.height != info->height))
-    return topic + ": image is " + std::to_string(img.width) + "x" + std::to_string(img.height) +
-           " but its camera_info says " + std::to_string(info->width) + "x" + std::to_string(info->height);
-  if (info && !info->header.frame_id.empty() && img.header.frame_id != info->header.frame_id)
-    return topic + ": image frame_id '" + img.header.frame_id + "' differs from its camera_info's '" +
-           info->header.frame_id + "'";
-  return "";
+  const InputFault f = checkImage(img, info);
+  return f ? topic + ": " + f.text() : std::string();
 }
 
 cv::Mat toMono8(const sensor_msgs::Image& img) {
   namespace enc = sensor_msgs::image_encodings;
-  if (img.encoding == enc::MONO16) {
-    cv::Mat m16 = cv_bridge::toCvCopy(img, enc::MONO16)->image, m8;
+  const bool mono8 = img.encoding == enc::MONO8 || img.encoding == enc::TYPE_8UC1;
+  const bool mono16 = img.encoding == enc::MONO16 || img.encoding == enc::TYPE_16UC1;
+  if (mono8 || mono16) {  // single channel: read directly (cv_bridge refuses 8UC1 -> mono8)
+    if (const InputFault f = checkImage(img)) throw std::invalid_argument("toMono8: " + f.text());
+    const cv::Mat view(static_cast<int>(img.height), static_cast<int>(img.width), mono8 ? CV_8UC1 : CV_16UC1,
+                       const_cast<uint8_t*>(img.data.data()), img.step);
+    if (mono8) return view.clone();
+    cv::Mat m16 = view.clone(), m8;
+    const bool host_big_endian = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
+    if (static_cast<bool>(img.is_bigendian) != host_big_endian)
+      for (int r = 0; r < m16.rows; ++r)
+        for (auto* p = m16.ptr<uint16_t>(r), *e = p + m16.cols; p != e; ++p) *p = static_cast<uint16_t>((*p >> 8) | (*p << 8));
     m16.convertTo(m8, CV_8U, 1.0 / 256.0);
     return m8;
   }

@@ -172,7 +172,18 @@ TEST(SlamSystem, BadInputIsDroppedOrNamed) {
     EXPECT_NE(std::string(e.what()).find("not after the previous frame"), std::string::npos) << e.what();
   }
   EXPECT_THROW(s.processFrame(std::nan(""), {}), std::invalid_argument);
-  EXPECT_THROW(s.addGyro(0.2, Eigen::Vector3d(std::nan(""), 0, 0)), std::invalid_argument);
+  // Without use_gyro a gyro sample is ignored unchecked, bad or not; with it, a bad one is refused.
+  EXPECT_FALSE(s.options().use_gyro);
+  EXPECT_NO_THROW(s.addGyro(0.2, Eigen::Vector3d(std::nan(""), 0, 0)));
+  EXPECT_NO_THROW(s.addGyro(0.2, Eigen::Vector3d::Zero(), -Eigen::Matrix3d::Identity()));
+  {
+    slam::SlamOptions og = s.options();
+    og.use_gyro = true;
+    slam::SlamSystem g(og);
+    EXPECT_THROW(g.addGyro(0.2, Eigen::Vector3d(std::nan(""), 0, 0)), std::invalid_argument);
+    EXPECT_THROW(g.addGyro(0.2, Eigen::Vector3d::Zero(), -Eigen::Matrix3d::Identity()), std::invalid_argument);
+    EXPECT_NO_THROW(g.addGyro(0.2, Eigen::Vector3d::Zero()));
+  }
   // And the filter is still usable.
   EXPECT_NO_THROW(s.processFrame(0.2, toMeasurements(sim.measure(2))));
 }

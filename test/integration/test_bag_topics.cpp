@@ -3,6 +3,8 @@
 // or given), several namespaces (an error naming them), and nothing matching (an error listing the bag's
 // topics); on real bags written here (no ROS master needed).
 #include <gtest/gtest.h>
+#include <iterator>
+#include <fstream>
 #include <rosbag/bag.h>
 #include <sensor_msgs/Image.h>
 #include <std_msgs/String.h>
@@ -119,4 +121,29 @@ TEST(OpenForReading, NamesTheBagItCannotOpen) {
   rosbag::Bag good;
   skin3d::ros_io::openForReading(&good, path);
   EXPECT_EQ(BagTopics(good, path, kWanted).count("stereo/left/image_raw"), 3u);
+}
+
+TEST(OpenForReading, ATruncatedBagGetsTheReindexAdviceAndAnEmptyFileIsSaidToBeEmpty) {
+  const std::string path = writeBag("skin3d_truncated_src.bag", {"/stereo/left/image_raw"});
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string cut = ::testing::TempDir() + "skin3d_truncated.bag";
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() * 6 / 10);
+  auto messageOf = [](const std::string& p) {
+    rosbag::Bag bag;
+    try {
+      skin3d::ros_io::openForReading(&bag, p);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string m = messageOf(cut);
+  EXPECT_NE(m.find("`rosbag reindex " + cut + "`"), std::string::npos) << m;
+  const std::string empty = ::testing::TempDir() + "skin3d_empty.bag";
+  std::ofstream(empty, std::ios::binary).close();
+  EXPECT_NE(messageOf(empty).find("the file is empty"), std::string::npos) << messageOf(empty);
+  const std::string text = ::testing::TempDir() + "skin3d_text.bag";
+  std::ofstream(text) << "not a bag at all\n";
+  EXPECT_EQ(messageOf(text).find("reindex"), std::string::npos) << messageOf(text);
 }

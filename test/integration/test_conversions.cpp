@@ -1,12 +1,19 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // The ROS layer's message conversions (skin3d/ros/conversions.h) that make_dataset writes and the nodelets and
-// process_bag read back: camera_info and mono8 images, each against values set here by hand.
+// process_bag read back: camera_info and mono8 images, each against values set here by hand; the input checks
+// of every door (input_checks.h) and the stereo pairing's drops (stereo_pairs.h).
 #include <gtest/gtest.h>
 
+#include <functional>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "skin3d/ros/conversions.h"
+#include "skin3d/ros/input_checks.h"
+#include "skin3d/ros/stereo_pairs.h"
 
 using namespace skin3d;
 
@@ -63,4 +70,201 @@ TEST(Conversions, Mono8ImageRoundTripKeepsEveryPixel) {
 TEST(Conversions, Mono8MessageRefusesOtherImageTypes) {
   EXPECT_THROW(ros_conv::toMono8Msg(cv::Mat(4, 4, CV_8UC3), "f", ros::Time(1, 0)), std::invalid_argument);
   EXPECT_THROW(ros_conv::toMono8Msg(cv::Mat(4, 4, CV_16UC1), "f", ros::Time(1, 0)), std::invalid_argument);
+}
+
+// ------------------------------------------------------------------ input checks (skin3d/ros/input_checks.h)
+
+namespace {
+sensor_msgs::CameraInfo goodInfo() {
+  geometry::CameraInfo c;
+  c.width = 64;
+  c.height = 48;
+  c.D = {-0.1, 0.02, 0.001, -0.002, 0.0};
+  c.K << 80, 0, 32, 0, 80, 24, 0, 0, 1;
+  c.R = Eigen::AngleAxisd(0.01, Eigen::Vector3d(0, 1, 0)).toRotationMatrix();
+  c.P << 80, 0, 32, -8, 0, 80, 24, 0, 0, 0, 1, 0;
+  return ros_conv::toMsg(c, "left_optical", ros::Time(10, 0));
+}
+
+sensor_msgs::Imu goodImu() {
+  sensor_msgs::Imu m;
+  m.header.stamp = ros::Time(10, 0);
+  m.angular_velocity.x = 0.01;
+  m.angular_velocity_covariance[0] = m.angular_velocity_covariance[4] = m.angular_velocity_covariance[8] = 1e-6;
+  m.orientation_covariance[0] = -1;
+  return m;
+}
+
+sensor_msgs::ImagePtr monoImage(int w, int h, const ros::Time& t, const std::string& encoding = "mono8") {
+  cv::Mat img(h, w, CV_8UC1);
+  for (int r = 0; r < h; ++r)
+    for (int c = 0; c < w; ++c) img.at<unsigned char>(r, c) = static_cast<unsigned char>(r * 5 + c);
+  sensor_msgs::ImagePtr m(new sensor_msgs::Image(ros_conv::toMono8Msg(img, "left_optical", t)));
+  m->encoding = encoding;
+  return m;
+}
+}  // namespace
+
+TEST(InputChecks, CameraInfoNamesEveryNonFiniteEntryByMatrixAndIndex) {
+  EXPECT_FALSE(ros_conv::checkCameraInfo(goodInfo())) << ros_conv::checkCameraInfo(goodInfo()).text();
+  sensor_msgs::CameraInfo m = goodInfo();
+  m.K[2] = std::numeric_limits<double>::quiet_NaN();
+  m.D[1] = std::numeric_limits<double>::infinity();
+  m.R[4] = std::numeric_limits<double>::quiet_NaN();
+  m.P[0] = std::numeric_limits<double>::quiet_NaN();
+  const auto f = ros_conv::checkCameraInfo(m);
+  EXPECT_EQ(f.fault, "non-finite camera_info entries");
+  for (const char* e : {"K[2] = nan", "D[1] = inf", "R[4] = nan", "P[0] = nan"})
+    EXPECT_NE(f.detail.find(e), std::string::npos) << e << " in " << f.detail;
+  EXPECT_EQ(f.text().find("is 0"), std::string::npos) << "a NaN is not a zero: " << f.text();
+  // The wrapper of the nodelets: topic first.
+  EXPECT_EQ(ros_conv::checkCameraInfo(m, "stereo/left/camera_info").rfind("stereo/left/camera_info: non-finite", 0), 0u);
+}
+
+TEST(InputChecks, CameraInfoRefusesZeroFocalLengthsAndMatricesOfTheWrongShape) {
+  auto faultOf = [](const std::function<void(sensor_msgs::CameraInfo*)>& edit) {
+    sensor_msgs::CameraInfo m = goodInfo();
+    edit(&m);
+    return ros_conv::checkCameraInfo(m).fault;
+  };
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->K[0] = m->K[4] = 0; }), "uncalibrated camera_info");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->K[4] = -80; }), "camera_info focal length not positive");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->K[8] = 0; }), "camera_info K is not an intrinsic matrix");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->P[0] = m->P[5] = 0; }), "camera_info has no projection matrix");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->P[5] = 0; }), "camera_info projection focal length not positive");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->P[10] = 0; }), "camera_info P is not a projection matrix");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->R.fill(0.0); }), "camera_info R is not a rotation");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->R[0] = -1; }), "camera_info R is not a rotation");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->width = 0; }), "camera_info has no image size");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->D.resize(3); }), "camera_info D does not fit its distortion_model");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->distortion_model = "equidistant"; }), "unsupported distortion_model");
+  EXPECT_EQ(faultOf([](sensor_msgs::CameraInfo* m) { m->D.clear(); }), "");  // plumb_bob without D: no distortion
+}
+
+TEST(InputChecks, ImuSamplesNeedFiniteRatesAndAPositiveDefiniteOrUnknownCovariance) {
+  EXPECT_FALSE(ros_conv::checkImu(goodImu()));
+  sensor_msgs::Imu m = goodImu();
+  m.angular_velocity.y = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(ros_conv::checkImu(m).fault, "non-finite angular velocity");
+  EXPECT_EQ(ros_conv::checkImu(m).detail, "y = nan");
+  m = goodImu();
+  m.angular_velocity_covariance[4] = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(ros_conv::checkImu(m).fault, "non-finite angular velocity covariance");
+  m = goodImu();
+  m.angular_velocity_covariance[8] = 0;  // singular
+  EXPECT_EQ(ros_conv::checkImu(m).fault, "angular velocity covariance not positive definite");
+  m.angular_velocity_covariance[8] = -1e-6;
+  EXPECT_EQ(ros_conv::checkImu(m).fault, "angular velocity covariance not positive definite");
+  m = goodImu();
+  m.angular_velocity_covariance[1] = 1e-7;  // not symmetric
+  EXPECT_EQ(ros_conv::checkImu(m).fault, "angular velocity covariance not symmetric");
+  // Unknown covariance: -1 in [0] (REP 145) or all zero; the SLAM then uses its gyro_noise.
+  m = goodImu();
+  m.angular_velocity_covariance.fill(0.0);
+  EXPECT_FALSE(ros_conv::checkImu(m));
+  m.angular_velocity_covariance[0] = -1;
+  EXPECT_FALSE(ros_conv::checkImu(m));
+  EXPECT_TRUE(ros_conv::gyroCovariance(m).isZero(0.0));
+  // Orientation and acceleration are not read, so not checked.
+  m = goodImu();
+  m.orientation.x = std::numeric_limits<double>::quiet_NaN();
+  m.linear_acceleration.z = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(ros_conv::checkImu(m));
+}
+
+TEST(InputChecks, Mono8And8UC1AreAcceptedAndConvertedWithoutCvBridge) {
+  const auto m = monoImage(9, 5, ros::Time(1, 0), "8UC1");
+  EXPECT_FALSE(ros_conv::checkImage(*m)) << ros_conv::checkImage(*m).text();
+  const cv::Mat a = ros_conv::toMono8(*m);
+  m->encoding = "mono8";
+  const cv::Mat b = ros_conv::toMono8(*m);
+  ASSERT_EQ(a.size(), cv::Size(9, 5));
+  EXPECT_EQ(cv::countNonZero(a != b), 0);
+  // 16UC1 as mono16, scaled by 1/256, either byte order.
+  sensor_msgs::Image w;
+  w.width = 2;
+  w.height = 1;
+  w.step = 4;
+  w.encoding = "16UC1";
+  w.is_bigendian = 0;
+  w.data = {0x00, 0x12, 0x00, 0xff};  // little-endian 0x1200, 0xff00
+  EXPECT_FALSE(ros_conv::checkImage(w));
+  cv::Mat g = ros_conv::toMono8(w);
+  EXPECT_EQ(g.at<unsigned char>(0, 0), 0x12);
+  EXPECT_EQ(g.at<unsigned char>(0, 1), 0xff);
+  w.is_bigendian = 1;
+  w.data = {0x12, 0x00, 0xff, 0x00};
+  g = ros_conv::toMono8(w);
+  EXPECT_EQ(g.at<unsigned char>(0, 0), 0x12);
+  EXPECT_EQ(g.at<unsigned char>(0, 1), 0xff);
+}
+
+TEST(InputChecks, ImagesNameTheirFault) {
+  auto m = monoImage(64, 48, ros::Time(1, 0));
+  const sensor_msgs::CameraInfo info = goodInfo();
+  EXPECT_FALSE(ros_conv::checkImage(*m, &info));
+  m->encoding = "32FC1";
+  EXPECT_EQ(ros_conv::checkImage(*m).fault, "unsupported encoding");
+  EXPECT_NE(ros_conv::checkImage(*m).detail.find("'32FC1'"), std::string::npos);
+  m = monoImage(32, 48, ros::Time(1, 0));
+  EXPECT_EQ(ros_conv::checkImage(*m, &info).fault, "image size differs from its camera_info's");
+  m->data.resize(10);
+  EXPECT_EQ(ros_conv::checkImage(*m).fault, "image data shorter than step x height");
+  m->step = 3;
+  EXPECT_EQ(ros_conv::checkImage(*m).fault, "image step smaller than a row");
+  m->data.clear();
+  EXPECT_EQ(ros_conv::checkImage(*m).fault, "empty image");
+}
+
+TEST(InputChecks, StampOrderRefusesZeroDuplicateAndBackwardsStamps) {
+  ros_conv::StampOrder o;
+  EXPECT_EQ(o.admit(ros::Time()).fault, "zero stamp");
+  EXPECT_FALSE(o.admit(ros::Time(10, 0)));
+  EXPECT_EQ(o.admit(ros::Time(10, 0)).fault, "duplicate stamp");
+  EXPECT_EQ(o.admit(ros::Time(9, 500000000)).fault, "stamp goes backwards");
+  EXPECT_NE(o.admit(ros::Time(9, 500000000)).detail.find("0.500000000 s before"), std::string::npos);
+  EXPECT_FALSE(o.admit(ros::Time(10, 1))) << "a bad stamp is not remembered";
+}
+
+TEST(StereoPairs, UnpairedImagesAndBadMessagesAreHandedToTheDropHandler) {
+  ros_io::StereoPairs pairs;
+  std::vector<std::string> drops;
+  pairs.setDropHandler([&](const std::string& topic, double t, const std::string& fault, const std::string&) {
+    drops.push_back(topic + "@" + std::to_string(static_cast<int>(t)) + ": " + fault);
+  });
+  sensor_msgs::CameraInfo bad = goodInfo();
+  bad.P[3] = std::numeric_limits<double>::quiet_NaN();
+  pairs.addCameraInfo(true, bad);
+  pairs.addCameraInfo(true, goodInfo());
+  pairs.addCameraInfo(false, goodInfo());
+  ASSERT_TRUE(pairs.calibrated());
+  pairs.addImage(true, monoImage(64, 48, ros::Time(1, 0)));
+  pairs.addImage(false, monoImage(64, 48, ros::Time(1, 0), "8UC1"));
+  pairs.addImage(true, monoImage(64, 48, ros::Time(2, 0)));  // its right image is missing
+  pairs.addImage(true, monoImage(64, 48, ros::Time(3, 0)));
+  pairs.addImage(false, monoImage(64, 48, ros::Time(3, 0)));
+  pairs.addImage(true, monoImage(64, 48, ros::Time(3, 0)));  // duplicate
+  pairs.addImage(true, monoImage(64, 48, ros::Time(4, 0)));
+  pairs.addImage(false, monoImage(32, 48, ros::Time(4, 0)));  // wrong size: both dropped at pairing
+  pairs.addImage(true, monoImage(64, 48, ros::Time(5, 0)));  // last left without a right one: dropped at flush
+  sensor_msgs::Image::ConstPtr l, r;
+  std::vector<int> stamps;
+  while (pairs.next(&l, &r)) {
+    EXPECT_EQ(l->header.stamp, r->header.stamp);
+    EXPECT_NO_THROW(pairs.rectifyRight(*r));
+    stamps.push_back(static_cast<int>(l->header.stamp.sec));
+  }
+  pairs.flush();
+  EXPECT_EQ(stamps, (std::vector<int>{1, 3}));
+  EXPECT_EQ(pairs.unpairedLeft(), 2);
+  EXPECT_EQ(pairs.unpairedRight(), 0);
+  const std::vector<std::string> want = {
+      "stereo/left/camera_info@10: non-finite camera_info entries",
+      "stereo/left/image_raw@3: duplicate stamp",
+      "stereo/left/image_raw@2: no right image with this stamp",
+      "stereo/left/image_raw@4: no usable right image with this stamp",
+      "stereo/right/image_raw@4: image size differs from its camera_info's",
+      "stereo/left/image_raw@5: no right image with this stamp"};
+  EXPECT_EQ(drops, want);
+  EXPECT_EQ(pairs.dropped(), 6);
 }

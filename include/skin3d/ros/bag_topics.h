@@ -55,9 +55,17 @@ TopicResolution resolveTopics(const std::vector<std::string>& stored, const std:
 
 /**
  * @brief Opens a bag for reading; throws std::invalid_argument "cannot open bag 'PATH': why" when it cannot
- * (missing, unreadable, not a bag, unindexed).
+ * (missing, a directory, empty, not a bag, unindexed; why = describeBagError).
  */
 void openForReading(rosbag::Bag* bag, const std::string& path);
+
+/**
+ * @brief rosbag's error `what` about the bag `path` in words a user can act on: "no such file", "the file is empty
+ * (0 bytes)", or `what` followed, when it is about a missing index or a read past the data (a truncated or
+ * unindexed bag), by the advice to run `rosbag reindex PATH`. Use it also for a rosbag::BagException thrown while
+ * iterating a view (a bag cut off inside a chunk): the runner then writes the results of the frames read so far.
+ */
+std::string describeBagError(const std::string& path, const std::string& what);
 
 /** @brief Every topic of an open bag (name, type, message count), sorted by name. */
 std::vector<BagTopic> listTopics(const rosbag::Bag& bag);

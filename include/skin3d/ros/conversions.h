@@ -26,6 +26,7 @@
 #include "skin3d/geometry/camera.h"
 #include "skin3d/induration/induration.h"
 #include "skin3d/induration/induration_config.h"
+#include "skin3d/ros/input_checks.h"
 #include "skin3d/slam/slam_system.h"
 #include "skin3d/stereo/dense_stereo.h"
 
@@ -49,13 +50,16 @@ skin3d::Landmark toLandmarkMsg(const Eigen::Vector3d& position, const Eigen::Mat
                                const std::vector<float>& descriptor, float strength,
                                const Eigen::Vector2d& uv_left, const Eigen::Vector2d& uv_right);
 
-/** @brief Empty when the camera_info is usable for rectification, else what is wrong with it. */
+/** @brief Empty when the camera_info is usable for rectification, else "TOPIC: fault (detail)" of
+ *  checkCameraInfo(m) (input_checks.h; a runner drops through its InputLedger with that one instead). */
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& m, const std::string& topic);
 
-/** @brief Empty when the image can be used, else what is wrong with it (names the topic). */
+/** @brief Empty when the image can be used, else "TOPIC: fault (detail)" of checkImage(img, info) (input_checks.h). */
 std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraInfo* info, const std::string& topic);
 
-/** @brief 8-bit grayscale view of a checked image (throws cv_bridge::Exception on conversion failure). */
+/** @brief 8-bit grayscale copy of an image that passed checkImage: mono8 and 8UC1 as they are, mono16 and 16UC1
+ *  scaled by 1/256 (either byte order), colour encodings through cv_bridge.
+ *  @throws std::invalid_argument (single-channel encodings) or cv_bridge::Exception when the image is not usable. */
 cv::Mat toMono8(const sensor_msgs::Image& img);
 
 /** @brief An 8-bit single-channel image as a mono8 message (copied row by row) in `frame`, stamped `t`. */

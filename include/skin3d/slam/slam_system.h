@@ -118,8 +118,10 @@ class SlamSystem {
   void setKnownMap(const std::vector<Eigen::Vector3d>& positions, const std::vector<std::vector<float>>& descriptors);
 
   /** @brief Buffers a gyroscope sample (time s, omega rad/s in the left optical frame, covariance (rad/s)^2;
-   *  a zero covariance means options.gyro_noise). Ignored unless options.use_gyro.
-   *  @throws std::invalid_argument for non-finite values. */
+   *  a zero covariance means options.gyro_noise). Ignored unless options.use_gyro: then nothing is checked and
+   *  nothing thrown (the runners check and drop bad samples through their InputLedger first, whatever the option).
+   *  @throws std::invalid_argument (use_gyro only) for non-finite values or a covariance that is not positive
+   *  definite. */
   void addGyro(double time, const Eigen::Vector3d& omega, const Eigen::Matrix3d& covariance = Eigen::Matrix3d::Zero());
   /**
    * @brief Processes one frame of stereo landmarks at `time` (s).

@@ -85,9 +85,9 @@ void SlamSystem::setKnownMap(const std::vector<Eigen::Vector3d>& positions,
 }
 
 void SlamSystem::addGyro(double time, const Eigen::Vector3d& omega, const Eigen::Matrix3d& covariance) {
+  if (!opt_.use_gyro) return;  // ignored, bad or not: without use_gyro a gyro sample never stops a run
   if (!std::isfinite(time) || !omega.allFinite() || !covariance.allFinite())
     throw std::invalid_argument("gyro sample: time, angular velocity and covariance must be finite");
-  if (!opt_.use_gyro) return;
   Eigen::Matrix3d C = covariance;
   if (C.isZero(0.0)) C = opt_.gyro_noise * opt_.gyro_noise * Eigen::Matrix3d::Identity();
   Eigen::LLT<Eigen::Matrix3d> llt(C);

@@ -14,6 +14,7 @@
 #include "skin3d/common/run_info.h"
 #include "skin3d/ros/conversions.h"
 #include "skin3d/ros/ground_truth_path.h"
+#include "skin3d/ros/input_checks.h"
 #include "skin3d/slam/slam_config.h"
 
 namespace skin3d {
@@ -28,24 +29,6 @@ slam::StampedPose fromPoseMsg(const geometry_msgs::PoseStamped& m) {
   p.p = Eigen::Vector3d(m.pose.position.x, m.pose.position.y, m.pose.position.z);
   p.q = Eigen::Quaterniond(m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z);
   return p;
-}
-
-/** The fault of a gyro sample, or empty. */
-std::string imuFault(const sensor_msgs::Imu& m) {
-  const auto& w = m.angular_velocity;
-  if (!std::isfinite(w.x) || !std::isfinite(w.y) || !std::isfinite(w.z)) return "non-finite angular velocity";
-  const auto& c = m.angular_velocity_covariance;
-  if (c[0] < 0.0) return "";  // -1: unknown -> the configured gyro_noise
-  Eigen::Matrix3d C;
-  for (int i = 0; i < 9; ++i) {
-    if (!std::isfinite(c[i])) return "non-finite angular_velocity_covariance";
-    C(i / 3, i % 3) = c[i];
-  }
-  if (C.isZero(0.0)) return "";
-  if (!C.isApprox(C.transpose(), 1e-9)) return "angular_velocity_covariance is not symmetric";
-  Eigen::LLT<Eigen::Matrix3d> llt(C);
-  if (llt.info() != Eigen::Success) return "angular_velocity_covariance is not positive definite";
-  return "";
 }
 
 }  // namespace
@@ -114,20 +97,19 @@ void SlamRunner::onImu(const sensor_msgs::Imu& imu) {
                  "the gyro must be expressed in the camera frame");
     return;
   }
-  const std::string fault = imuFault(imu);
-  if (!fault.empty()) {
-    ledger_.drop("imu/data", t, fault);
+  if (!imu_order_.last().isZero() && t < imu_order_.last().toSec() - par_.jump_back) {
+    imu_order_.reset();  // a restarted stream (bag): its frames will reset the SLAM
+    last_gyro_ = -1e300;
+  }
+  ros_conv::InputFault fault = imu_order_.admit(imu.header.stamp);
+  if (!fault) fault = ros_conv::checkImu(imu);
+  if (fault) {
+    ledger_.drop("imu/data", t, fault.fault, fault.detail);
     return;
   }
-  if (imu.header.stamp.isZero()) {
-    ledger_.drop("imu/data", t, "zero stamp");
-    return;
-  }
-  Eigen::Matrix3d C;
-  for (int i = 0; i < 9; ++i) C(i / 3, i % 3) = imu.angular_velocity_covariance[i];
-  if (C(0, 0) < 0.0) C.setZero();  // unknown: the configured gyro_noise
   try {
-    slam_->addGyro(t, Eigen::Vector3d(imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z), C);
+    slam_->addGyro(t, Eigen::Vector3d(imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z),
+                   ros_conv::gyroCovariance(imu));
   } catch (const std::exception& e) {
     ledger_.drop("imu/data", t, e.what());
     return;
@@ -240,6 +222,7 @@ void SlamRunner::resetLocked() {
   truth_.clear();
   waiting_.clear();
   last_frame_ = -1e300;
+  last_gyro_ = -1e300;
   unsaved_ = false;
   status_.reset();
   if (pub_) pub_->clearPath();

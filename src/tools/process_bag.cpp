@@ -38,11 +38,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
+#include <memory>
 #include <iostream>
 #include <string>
 
 #include "process_bag.h"
+#include "skin3d/common/cli.h"
 #include "process_bag_induration.h"
 #include "skin3d/common/large_buffers.h"
 #include "skin3d/slam/results.h"
@@ -79,27 +80,24 @@ const char* kUsage =
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
     "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n";
 
-/** A whole number >= 0 for `option`, or exit 2 naming the option (strict: "3x", "-5", "abc" are refused). */
-int countArg(const std::string& option, const std::string& v) {
-  char* end = nullptr;
-  errno = 0;
-  const long n = std::strtol(v.c_str(), &end, 10);
-  if (v.empty() || *end != '\0' || errno != 0 || n < 0 || n > 2000000000L) {
-    std::cerr << "process_bag: " << option << ": '" << v << "' is not a whole number >= 0\n";
+/** A strict whole number for `option`, or exit 2 with the message naming it. */
+long whole(const std::string& option, const std::string& v, long min, long max) {
+  try {
+    return common::parseWholeNumber(option, v, min, max);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "process_bag: " << e.what() << "\n";
     std::exit(2);
   }
-  return static_cast<int>(n);
 }
 
-/** A number > 0 for `option`, or exit 2 naming the option. */
-double positiveArg(const std::string& option, const std::string& v) {
-  char* end = nullptr;
-  const double d = std::strtod(v.c_str(), &end);
-  if (v.empty() || *end != '\0' || !(d > 0.0) || !std::isfinite(d)) {
-    std::cerr << "process_bag: " << option << ": '" << v << "' is not a positive number\n";
+/** A strict number for `option`, or exit 2 with the message naming it. */
+double number(const std::string& option, const std::string& v, double min, bool min_exclusive) {
+  try {
+    return common::parseNumber(option, v, min, min_exclusive);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "process_bag: " << e.what() << "\n";
     std::exit(2);
   }
-  return d;
 }
 
 std::pair<std::string, std::string> keyValue(const std::string& option, const std::string& kv) {
@@ -109,21 +107,6 @@ std::pair<std::string, std::string> keyValue(const std::string& option, const st
     std::exit(2);
   }
   return {kv.substr(0, eq), kv.substr(eq + 1)};
-}
-
-/** The results directory, created before the first message is read (a run is never lost to an unwritable
- *  --out): created with its parents, then probed by writing a file. @throws std::runtime_error naming it. */
-void prepareOut(const std::string& dir) {
-  std::error_code ec;
-  std::filesystem::create_directories(dir, ec);
-  if (ec) throw std::runtime_error("cannot create the results directory '" + dir + "': " + ec.message());
-  const std::string probe = dir + "/.process_bag_write_test";
-  if (std::FILE* f = std::fopen(probe.c_str(), "w")) {
-    std::fclose(f);
-    std::remove(probe.c_str());
-  } else {
-    throw std::runtime_error("cannot write into the results directory '" + dir + "'");
-  }
 }
 
 }  // namespace
@@ -152,8 +135,8 @@ int main(int argc, char** argv) {
     else if (k == "--ns") a.ns = value();
     else if (k == "--input") a.input = value();
     else if (k == "--ate-align") a.ate_align = value();
-    else if (k == "--ate-max-dt") a.ate_max_dt = positiveArg(k, value());
-    else if (k == "--frames") a.frames = countArg(k, value());
+    else if (k == "--ate-max-dt") a.ate_max_dt = number(k, value(), 0.0, true);
+    else if (k == "--frames") a.frames = static_cast<int>(whole(k, value(), 0, 2000000000L));
     else if (k == "--gyro") a.gyro = true;
     else if (k == "--quiet") a.quiet = true;
     else if (k == "--serial") a.serial = true;
@@ -187,18 +170,15 @@ int main(int argc, char** argv) {
     std::cerr << "process_bag: --ate-align: " << e.what() << "\n";
     return 2;
   }
-  const bool out_existed = std::filesystem::exists(a.out);
+  // The results directory is made and probed before the bag is read (a run is never lost to an unwritable --out);
+  // an early failure leaves no empty results directory behind (the guard removes what it created, if still empty).
+  std::unique_ptr<common::OutputDirectoryGuard> out_guard;
   try {
-    prepareOut(a.out);
+    out_guard = std::make_unique<common::OutputDirectoryGuard>(common::prepareOutputDirectory(a.out));
   } catch (const std::exception& e) {
     std::cerr << "process_bag: " << e.what() << std::endl;
     return 3;
   }
-  // An early failure leaves no empty results directory behind.
-  auto cleanup = [&]() {
-    std::error_code ec;
-    if (!out_existed && std::filesystem::is_empty(a.out, ec)) std::filesystem::remove(a.out, ec);
-  };
   try {
     if (induration) {
       tools::IndurationRun r;
@@ -215,11 +195,9 @@ int main(int argc, char** argv) {
     return tools::runSlam(a);
   } catch (const std::runtime_error& e) {
     std::cerr << "process_bag: " << e.what() << std::endl;
-    cleanup();
     return 3;
   } catch (const std::exception& e) {
     std::cerr << "process_bag: " << e.what() << std::endl;
-    cleanup();
     return 1;
   }
 }

@@ -158,7 +158,10 @@ int runSlam(const SlamRun& a) {
     progress.tick(slam.frames(), detail);
   };
   OverlappedFrontEnd overlap(front_end.get(), a.serial, to_slam);
+  ros_run::RunLog pairs_log = ros_run::RunLog::stderrLog("process_bag", a.quiet);
+  ros_run::InputLedger pairs_ledger(&pairs_log);  // images that cannot be paired, bad stamps, encodings, sizes
   ros_io::StereoPairs pairs;
+  pairs.setLedger(&pairs_ledger);
   auto full = [&]() { return a.frames >= 0 && fed + overlap.inFlight() >= a.frames; };
   for (const rosbag::MessageInstance& mi : view) {
     if (full()) break;
@@ -176,13 +179,22 @@ int runSlam(const SlamRun& a) {
     while (!full() && pairs.next(&left, &right))
       overlap.submit(left, pairs.leftInfoMsg(), right, pairs.rightInfoMsg());
   }
+  if (!full()) {  // the whole bag was read: what still waits for a partner is dropped (and counted)
+    pairs.flush();
+    sensor_msgs::Image::ConstPtr left, right;
+    while (pairs.next(&left, &right)) overlap.submit(left, pairs.leftInfoMsg(), right, pairs.rightInfoMsg());
+  }
   overlap.finish();  // the last pair
   slam.flush();      // the frames still waiting for the gyro
   progress.done();
-  const int dropped = slam.ledger().dropped() + (front_end ? front_end->ledger().dropped() : 0);
+  ros_run::InputLedger upstream = front_end ? front_end->ledger() : ros_run::InputLedger();
+  upstream.absorb(pairs_ledger);
+  upstream.setLog(nullptr);
+  const int dropped = slam.ledger().dropped() + upstream.dropped();
   if (slam.frames() == 0)
     throw std::invalid_argument("no frame of '" + a.bag + "' could be processed (" + topics.summary() + "; " +
-                                std::to_string(dropped) + " dropped" +
+                                std::to_string(dropped) + " dropped: " + upstream.summary() + "; " +
+                                slam.ledger().summary() +
                                 (use_images && !pairs.calibrated() ? "; no camera_info for both cameras" : "") + ")");
 
   // ---- results: those of the SLAM runner, with the bag's figures
@@ -192,9 +204,8 @@ int runSlam(const SlamRun& a) {
       {"front_end_ms_per_frame", front_end ? std::to_string(1e3 * front_end->secondsPerFrame()) : "none"},
       {"pipeline", !front_end ? "none (landmark bag)" : a.serial ? "serial (--serial)" : "front end || SLAM, 2 threads"},
       {"wall_time_s", std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count())}};
-  const ros_run::InputLedger front_end_drops = front_end ? front_end->ledger() : ros_run::InputLedger();
   std::string message;
-  if (!slam.save(a.out, &message, extra, a.command_line, &front_end_drops)) throw std::runtime_error(message);
+  if (!slam.save(a.out, &message, extra, a.command_line, &upstream)) throw std::runtime_error(message);
   if (!a.quiet) std::cout << message << std::flush;
   return 0;
 }

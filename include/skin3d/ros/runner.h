@@ -78,6 +78,12 @@ class InputLedger {
    */
   void drop(const std::string& topic, double stamp, const std::string& fault, const std::string& detail = "");
   int dropped() const { return total_; }
+  /** @brief Adds the drops of another ledger (a stage before this one) to these counts. */
+  void absorb(const InputLedger& other) {
+    total_ += other.total_;
+    for (const auto& kv : other.counts_) counts_[kv.first] += kv.second;
+    if (!other.last_.empty()) last_ = other.last_;
+  }
   /** @brief "topic: fault" -> count. */
   const std::map<std::string, int>& byFault() const { return counts_; }
   const std::string& lastError() const { return last_; }

@@ -25,6 +25,7 @@
 #include <utility>
 #include <vector>
 
+#include "skin3d/ros/input_checks.h"
 #include "skin3d/ros/runner.h"
 #include "skin3d/ros/slam_messages.h"
 #include "skin3d/slam/results.h"
@@ -116,6 +117,7 @@ class SlamRunner {
   };
   std::deque<Waiting> waiting_;                          // frames waiting for the gyro
   double last_gyro_ = -1e300;                            // stamp of the newest gyro sample
+  ros_conv::StampOrder imu_order_;                       // imu/data stamps must increase
   double last_frame_ = -1e300;                           // stamp of the newest frame taken
   bool unsaved_ = false;
   double slam_seconds_ = 0.0;

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
  * @file test_induration_replay.cpp
- * @brief rostest of skin3d/dense_stereo and skin3d/induration through launch/replay_workpiece.launch on a
+ * @brief rostest of skin3d/induration through launch/replay_workpiece.launch on a
  * reduced bag made at build time (a quarter-resolution workpiece, or a half-resolution skin scene): the reports
  * against the generator's ground truth (BAG.truth.yaml; loose guards of the ROS path, the core's accuracy is
  * tested in test_induration), the height map, the results directory through ~save_results, and bad input that
@@ -56,7 +56,7 @@ struct Listener {
   }
   void onLog(const rosgraph_msgs::Log::ConstPtr& log) {
     std::lock_guard<std::mutex> l(m);
-    if (log->level >= rosgraph_msgs::Log::ERROR) errors.push_back(*log);
+    if (log->level >= rosgraph_msgs::Log::WARN) errors.push_back(*log);  // a dropped message: a warning
   }
   size_t numReports() {
     std::lock_guard<std::mutex> l(m);
@@ -240,14 +240,13 @@ TEST(IndurationReplay, SaveResults) {
   EXPECT_FALSE(bad.response.message.empty());
 }
 
-// Bad input drops the frame with an error that names the problem; both nodelets keep running.
+// Bad input drops the frame with a warning that names the topic and the problem; the nodelet keeps running.
 TEST(IndurationReplay, BadInputKeepsRunning) {
   ros::NodeHandle nh;
-  ros::Publisher li = nh.advertise<sensor_msgs::Image>("stereo/left/image_rect", 2);
-  ros::Publisher ri = nh.advertise<sensor_msgs::Image>("stereo/right/image_rect", 2);
+  ros::Publisher li = nh.advertise<sensor_msgs::Image>("stereo/left/image_raw", 2);
+  ros::Publisher ri = nh.advertise<sensor_msgs::Image>("stereo/right/image_raw", 2);
   ros::Publisher lc = nh.advertise<sensor_msgs::CameraInfo>("stereo/left/camera_info", 2);
   ros::Publisher rc = nh.advertise<sensor_msgs::CameraInfo>("stereo/right/camera_info", 2);
-  ros::Publisher pts = nh.advertise<sensor_msgs::PointCloud2>("induration/points", 2);
   // The nodelets' throttled errors count simulated time, which stopped with the bag: move it on before each
   // case, or the second error at the same call site would be throttled away.
   ros::Publisher clock = nh.advertise<rosgraph_msgs::Clock>("/clock", 1);
@@ -262,7 +261,7 @@ TEST(IndurationReplay, BadInputKeepsRunning) {
   };
   ASSERT_TRUE(waitFor([&] { return li.getNumSubscribers() > 0 && ri.getNumSubscribers() > 0 &&
                                    lc.getNumSubscribers() > 0 && rc.getNumSubscribers() > 0 &&
-                                   pts.getNumSubscribers() > 0 && clock.getNumSubscribers() > 0; }, 10.0));
+                                   clock.getNumSubscribers() > 0; }, 10.0));
 
   auto publishPair = [&](double stamp, sensor_msgs::Image l, sensor_msgs::CameraInfo lci, sensor_msgs::Image r,
                          sensor_msgs::CameraInfo rci) {
@@ -284,16 +283,6 @@ TEST(IndurationReplay, BadInputKeepsRunning) {
   publishPair(tick(), image(L, 64, 48), uncal, image(R, 64, 48), cameraInfo(R, 64, 48, 0.1));
   EXPECT_TRUE(waitFor([] { return listener.hasError("uncalibrated"); }, 20.0))
       << "no error about the uncalibrated camera_info on /rosout";
-  // A cloud that is not organised.
-  sensor_msgs::PointCloud2 flat;
-  flat.header.frame_id = L;
-  flat.height = 1;
-  flat.width = 10;
-  flat.header.stamp = ros::Time(tick());
-  pts.publish(flat);
-  EXPECT_TRUE(waitFor([] { return listener.hasError("not organised"); }, 20.0))
-      << "no error about the unorganised cloud on /rosout";
-
   // Still alive: the manager answers the service.
   skin3d::SaveResults srv;
   srv.request.directory = "/tmp/skin3d_induration_rostest_alive";

@@ -1,12 +1,15 @@
 #!/usr/bin/python3
 # SPDX-License-Identifier: BSD-3-Clause
-"""The two doors give the same numbers: one bag through `roslaunch skin3d replay_globe.launch` (the live nodelets)
-and through `process_bag` (the offline tool), each with its defaults, gives the same trajectory.tum to the last
-digit (and the same map.ply), for image bags with and without the gyro and for a landmark bag.
+"""The two doors give the same numbers: one bag through the launch files (the live nodelets) and through
+`process_bag` (the offline tool), each with its defaults, gives
+- the same trajectory.tum to the last digit (and the same map.ply) through replay_globe.launch, for image bags with
+  and without the gyro and for a landmark bag;
+- the same induration.yaml through replay_workpiece.launch and `process_bag --induration`, apart from the lines
+  that name the input (`source:`) and the processing time of each frame (`seconds:`).
 
 usage: check_doors.py --process-bag PATH --data DIR [--xunit FILE]
 
-DIR holds the bags the build makes (globe_images_10.bag, globe_landmarks_40.bag). roslaunch runs on a free port
+DIR holds the bags the build makes (globe_images_10.bag, globe_landmarks_40.bag, workpiece_quarter.bag). roslaunch runs on a free port
 with its own master, so it does not meet another test's. Exit status 1 when a check fails.
 """
 import argparse
@@ -20,11 +23,22 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from xunit import write_xunit  # noqa: E402
 
 CASES = [
-    # name, bag, process_bag options, launch arguments
-    ("images", "globe_images_10.bag", [], ["images:=true"]),
-    ("images_gyro", "globe_images_10.bag", ["--gyro"], ["images:=true", "gyro:=true"]),
-    ("landmarks_gyro", "globe_landmarks_40.bag", ["--gyro"], ["gyro:=true"]),
+    # name, bag, process_bag options, launch file and arguments, files compared
+    ("images", "globe_images_10.bag", [], ["replay_globe.launch", "images:=true"], ["trajectory.tum", "map.ply"]),
+    ("images_gyro", "globe_images_10.bag", ["--gyro"], ["replay_globe.launch", "images:=true", "gyro:=true"],
+     ["trajectory.tum", "map.ply"]),
+    ("landmarks_gyro", "globe_landmarks_40.bag", ["--gyro"], ["replay_globe.launch", "gyro:=true"],
+     ["trajectory.tum", "map.ply"]),
+    ("induration", "workpiece_quarter.bag", ["--induration"], ["replay_workpiece.launch"], ["induration.yaml"]),
 ]
+# lines that may differ between the doors: the input's name and the wall time of a frame
+VARYING = ("source:", "seconds:")
+
+
+def comparable(name, data):
+    if name != "induration.yaml":
+        return data
+    return b"\n".join(l for l in data.splitlines() if not l.strip().decode().startswith(VARYING))
 
 
 def free_port():
@@ -39,13 +53,13 @@ def read(path):
     try:
         with open(path, "rb") as f:
             return f.read()
-    except OSError as e:
-        return None if e else None
+    except OSError:
+        return None
 
 
 def run_case(tmp, process_bag, data, case):
-    name, bag, pb_args, launch_args = case
-    bag = os.path.join(data, bag)
+    name, bag, pb_args, launch_args, files = case
+    bag = os.path.join(os.path.abspath(data), bag)
     if not os.path.exists(bag):
         return "the test bag %s is missing (built by the skin3d_*_test_bag targets)" % bag
     off, live = os.path.join(tmp, name + "_process_bag"), os.path.join(tmp, name + "_launch")
@@ -55,26 +69,27 @@ def run_case(tmp, process_bag, data, case):
         return "process_bag failed (%d): %s" % (r.returncode, r.stdout[-2000:])
     port = free_port()
     env = dict(os.environ, ROS_MASTER_URI="http://localhost:%d" % port, ROS_HOME=os.path.join(tmp, "ros_home"))
-    cmd = ["roslaunch", "-p", str(port), "skin3d", "replay_globe.launch", "bag:=" + bag, "results:=" + live,
-           "wait_for_subscribers:=true"] + launch_args
+    cmd = ["roslaunch", "-p", str(port), "skin3d", launch_args[0], "bag:=" + bag, "results:=" + live,
+           "wait_for_subscribers:=true"] + launch_args[1:]
     try:
         r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, timeout=600)
     except subprocess.TimeoutExpired:
         return "roslaunch did not end within 600 s"
     if r.returncode != 0:
         return "roslaunch failed (%d): %s" % (r.returncode, r.stdout[-2000:])
-    for f in ("trajectory.tum", "map.ply"):
+    for f in files:
         a, b = read(os.path.join(off, f)), read(os.path.join(live, f))
         if a is None or b is None:
             return "%s missing (process_bag: %s, launch: %s); launch output: %s" % (
                 f, a is not None, b is not None, r.stdout[-2000:])
+        a, b = comparable(f, a), comparable(f, b)
         if a != b:
             la, lb = a.decode().splitlines(), b.decode().splitlines()
             first = next((i for i in range(min(len(la), len(lb))) if la[i] != lb[i]), min(len(la), len(lb)))
             return "%s differs: %d lines from process_bag, %d from the launch; first difference at line %d: %r vs %r" % (
                 f, len(la), len(lb), first + 1, la[first] if first < len(la) else "", lb[first] if first < len(lb) else "")
     print("check_doors: %s: %s identical through both doors (%d lines)" % (
-        name, "trajectory.tum and map.ply", len(read(os.path.join(off, "trajectory.tum")).splitlines())))
+        name, " and ".join(files), len(read(os.path.join(off, files[0])).splitlines())))
     return ""
 
 

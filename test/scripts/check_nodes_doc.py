@@ -31,6 +31,7 @@ NODES = {
     "stereo_front_end": (["src/ros/front_end_runner.cpp"], [("config/frontend.yaml", None)]),
     "eskf_slam": (["src/ros/slam_runner.cpp", "src/ros/slam_messages.cpp"], [("config/slam.yaml", "docs/slam.md")]),
     "stereo_design": (["src/ros/design_node.cpp"], []),
+    "induration": (["src/ros/induration_runner.cpp"], [("config/induration.yaml", "docs/induration.md")]),
 }
 # runners added later register here by file name pattern (src/ros/<name>_runner.cpp); see find_files()
 

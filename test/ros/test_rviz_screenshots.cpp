@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: BSD-3-Clause
-// Issue 7: rviz under Xvfb with each of the project's rviz configs, through scripts/rviz_screenshot, on the
+// rviz under Xvfb with each of the project's rviz configs, through scripts/rviz_screenshot, on the
 // datasets the other tests build. A screenshot must show the scene: it is compared with a screenshot of rviz
 // on the same config with no data (the empty window), region by region: the 3D view must change well above
 // the difference between two empty windows there (the noise floor, measured in the same run), and where a

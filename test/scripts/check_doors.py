@@ -29,7 +29,10 @@ CASES = [
      ["trajectory.tum", "map.ply"]),
     ("landmarks_gyro", "globe_landmarks_40.bag", ["--gyro"], ["replay_globe.launch", "gyro:=true"],
      ["trajectory.tum", "map.ply"]),
-    ("induration", "workpiece_quarter.bag", ["--induration"], ["replay_workpiece.launch"], ["induration.yaml"]),
+    # the workpiece bag also holds ground_truth/pose, which no induration node reads: no waiting for subscribers
+    # (the player would wait for ever), the player's delay gives the nodelet time to subscribe instead
+    ("induration", "workpiece_quarter.bag", ["--induration"],
+     ["replay_workpiece.launch", "wait_for_subscribers:=false", "delay:=8"], ["induration.yaml"]),
 ]
 # lines that may differ between the doors: the input's name and the wall time of a frame
 VARYING = ("source:", "seconds:")
@@ -69,8 +72,9 @@ def run_case(tmp, process_bag, data, case):
         return "process_bag failed (%d): %s" % (r.returncode, r.stdout[-2000:])
     port = free_port()
     env = dict(os.environ, ROS_MASTER_URI="http://localhost:%d" % port, ROS_HOME=os.path.join(tmp, "ros_home"))
-    cmd = ["roslaunch", "-p", str(port), "skin3d", launch_args[0], "bag:=" + bag, "results:=" + live,
-           "wait_for_subscribers:=true"] + launch_args[1:]
+    cmd = ["roslaunch", "-p", str(port), "skin3d", launch_args[0], "bag:=" + bag, "results:=" + live]
+    cmd += [a for a in launch_args[1:] if a.startswith("wait_for_subscribers:=")] or ["wait_for_subscribers:=true"]
+    cmd += [a for a in launch_args[1:] if not a.startswith("wait_for_subscribers:=")]
     try:
         r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, timeout=600)
     except subprocess.TimeoutExpired:

@@ -18,20 +18,14 @@
 #include <vector>
 
 #include "skin3d/geometry/sphere_fit.h"
+#include "skin3d/geometry/stamped_pose.h"
 #include "skin3d/slam/slam_system.h"
 
 namespace skin3d {
 namespace slam {
 
 /** @brief One pose of a trajectory: time (s), world <- left optical frame. */
-struct StampedPose {
-  double t = 0.0;  //!< s, for computing (a double holds an epoch stamp to ~0.2 us only)
-  /** The exact stamp (ns since the epoch) when it came from a message header or a file; < 0: unknown (files
-   *  then write t). trajectory.tum keeps every digit of it, so that tools that associate by time pair all poses. */
-  std::int64_t stamp_ns = -1;
-  Eigen::Vector3d p = Eigen::Vector3d::Zero();
-  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
-};
+using StampedPose = geometry::StampedPose;  //!< geometry/stamped_pose.h
 
 /** @brief Per-frame filter state for plots (one row of state.csv). */
 struct StateRow {

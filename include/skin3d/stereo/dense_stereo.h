@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "skin3d/geometry/camera.h"
+#include "skin3d/geometry/dense_cloud.h"
 
 namespace skin3d {
 namespace stereo {
@@ -156,15 +157,8 @@ cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left);
 std::pair<double, double> disparityRangeForDepth(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                                  double z_min, double z_max);
 
-/** @brief Organised point cloud of a disparity map. */
-struct DenseCloud {
-  cv::Mat xyz;              //!< CV_32FC3, m, in the left camera's (unrectified) optical frame: R^T * X_rect; NaN unknown
-  cv::Mat sigma;            //!< CV_32F, m, 1 sigma of the point along its viewing ray (from the disparity sigma)
-  cv::Mat ray;              //!< CV_32FC3, unit viewing ray of every pixel (known or not), same frame as xyz
-  /** The right camera's centre in the same frame (the left camera's is the origin); NaN if not known. */
-  cv::Vec3d right_centre{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
-                         std::numeric_limits<double>::quiet_NaN()};
-};
+/** @brief Organised point cloud of a disparity map (geometry/dense_cloud.h). */
+using DenseCloud = geometry::DenseCloud;
 
 /**
  * @brief Triangulates a disparity map with the rectified pair's projections (P of each CameraInfo; the

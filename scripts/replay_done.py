@@ -11,7 +11,8 @@ launch and makes the nodes write their results, when
 - as many have come as the bag holds frames (messages on --frames-topic; default: stereo/left/image_raw when the
   bag has it, else stereo/landmarks; found at the root or under one namespace, as process_bag finds them), or
 - none has come for --idle seconds (wall time, default 20) after the first one (frames were dropped), or
-- --timeout seconds (wall time, default 0: none) have passed.
+- --timeout seconds (wall time, default 0: none) have passed (the only way out when no frame can be processed).
+The replay launch passes its idle:= and timeout:= arguments.
 It says which on stdout. Exit status 0, or 2 on a bad command line or an unreadable bag.
 """
 import argparse

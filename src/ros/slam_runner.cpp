@@ -259,7 +259,7 @@ bool SlamRunner::saveLocked(const std::string& dir, std::string* message,
                  {"dropped_input", why},
                  {"gyro", slam_->options().use_gyro ? "true" : "false"},
                  {"known_map", par_.known_map.empty() ? "false" : "true"},
-                 {"front_end", par_.front_end.empty() ? "none (landmarks with their own model)" : par_.front_end},
+                 {"front_end", par_.front_end.empty() ? "none (landmark bag)" : par_.front_end},
                  {"world_frame", par_.world_frame},
                  {"camera_frame", par_.camera_frame},
                  {"slam_ms_per_frame", std::to_string(1e3 * slam_seconds_ / n)}};

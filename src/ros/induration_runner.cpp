@@ -29,6 +29,11 @@ IndurationRunner::~IndurationRunner() {
   }
 }
 
+void IndurationRunner::keepEveryFrameMaps(const std::string& dir) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  every_frame_maps_ = dir;
+}
+
 int IndurationRunner::frames() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return static_cast<int>(frames_.size());
@@ -64,6 +69,14 @@ bool IndurationRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs:
     frames_.back().result.labels.release();
   }
   frames_.push_back(m->record);
+  if (!every_frame_maps_.empty()) {
+    const std::string dir = induration::frameMapsDirectory(every_frame_maps_, static_cast<int>(frames_.size()) - 1);
+    try {
+      induration::writeFrameMaps(dir, *m);
+    } catch (const std::exception& e) {
+      log_.warnThrottled("frame maps", std::string("the frame's maps were not written: ") + e.what());
+    }
+  }
   frame_id_ = li.header.frame_id;
   unsaved_ = true;
   if (attached_) {
@@ -163,8 +176,10 @@ void IndurationRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const s
                           const sensor_msgs::Image::ConstPtr& ri,
                           const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); });
   const auto& o = measurer_.options().induration;
+  const auto& po = measurer_.options();
   log_.info("reference '" + o.reference_model + "', plaques above " + std::to_string(o.min_height * 1e3) + " mm; depth " +
-            std::to_string(measurer_.options().z_min) + "-" + std::to_string(measurer_.options().z_max) + " m" +
+            (po.autoDepthRange() ? std::string("range searched in each pair")
+                                 : std::to_string(po.z_min) + "-" + std::to_string(po.z_max) + " m") +
             (results_.empty() ? "" : "; results on shutdown to " + results_));
 }
 
@@ -190,6 +205,10 @@ std::unique_ptr<IndurationRunner> startIndurationRunner(ros::NodeHandle& nh, ros
   pnh.param<std::string>("results", results, results);
   pnh.param("queue_size", queue, queue);
   pnh.param("approximate_sync", approximate, approximate);
+  std::string maps = "last";
+  pnh.param<std::string>("maps", maps, maps);
+  if (maps != "last" && maps != "all") errors.push_back("~maps = '" + maps + "' must be last or all");
+  if (maps == "all" && results.empty()) errors.push_back("~maps = all needs ~results (the directory they go to)");
   if (queue < 1) errors.push_back("~queue_size = " + std::to_string(queue) + " must be >= 1");
   try {
     opt.validate();
@@ -202,6 +221,7 @@ std::unique_ptr<IndurationRunner> startIndurationRunner(ros::NodeHandle& nh, ros
     throw std::invalid_argument(all);
   }
   auto runner = std::make_unique<IndurationRunner>(opt, results, std::move(log));
+  if (maps == "all") runner->keepEveryFrameMaps(results);
   runner->attach(nh, pnh, name, queue, approximate);
   return runner;
 }

@@ -78,7 +78,9 @@ const char* kUsage =
     "  --serial     image bags: run the front end and the SLAM one after the other instead of overlapping them on\n"
     "               two threads (same results; for timing comparisons)\n"
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
-    "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n";
+    "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n"
+    "  --maps       with --induration: last (default: the last frame's maps) | all (every frame's too, in\n"
+    "               DIR/frames/NNNN/ as it is measured)\n";
 
 /** A strict whole number for `option`, or exit 2 with the message naming it. */
 long whole(const std::string& option, const std::string& v, long min, long max) {
@@ -115,6 +117,7 @@ int main(int argc, char** argv) {
   skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   tools::SlamRun a;
   bool induration = false;
+  std::string maps = "last";
   a.command_line.assign(argv, argv + argc);
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
@@ -141,6 +144,7 @@ int main(int argc, char** argv) {
     else if (k == "--quiet") a.quiet = true;
     else if (k == "--serial") a.serial = true;
     else if (k == "--induration") induration = true;
+    else if (k == "--maps") maps = value();
     else if (k == "--set") a.sets.push_back(keyValue(k, value()));
     else if (k == "-h" || k == "--help") {
       std::cout << kUsage;
@@ -154,6 +158,14 @@ int main(int argc, char** argv) {
   }
   if (a.bag.empty() || a.out.empty()) {
     std::cerr << "process_bag: --bag and --out are required\n" << kUsage;
+    return 2;
+  }
+  if (maps != "last" && maps != "all") {
+    std::cerr << "process_bag: --maps must be last or all (got '" << maps << "')\n";
+    return 2;
+  }
+  if (maps != "last" && !induration) {
+    std::cerr << "process_bag: --maps needs --induration (the SLAM writes no maps)\n";
     return 2;
   }
   if (a.input != "auto" && a.input != "images" && a.input != "landmarks") {
@@ -187,6 +199,7 @@ int main(int argc, char** argv) {
       r.configs = a.configs;
       r.sets = a.sets;
       r.frames = a.frames;
+      r.every_frame_maps = maps == "all";
       r.quiet = a.quiet;
       r.ns = a.ns;
       r.command_line = a.command_line;

@@ -14,6 +14,7 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
+#include <cmath>
 #include <cstdio>
 
 #include "skin3d/induration/induration_config.h"
@@ -34,7 +35,12 @@ void printFrame(const induration::FrameMeasurement& m, int k, int expected) {
               k, expected, m.record.stamp, 100 * m.record.valid_fraction, r.reference.rms * 1e3, r.plaques.size(),
               m.record.seconds, m.seconds_rectify, m.seconds_match, m.disparity.timing.sgbm, m.disparity.timing.refine,
               m.seconds_triangulate, m.seconds_measure);
-  std::printf("  %s\n", stereo::describeUnknown(m.disparity).c_str());
+  const auto& f = m.record;
+  std::printf("  depth %.3f ... %.3f m (%s; disparity %.0f ... %.0f px)", f.z_near, f.z_far,
+              f.range_searched ? "searched" : "set", f.min_disparity, f.max_disparity);
+  if (std::isfinite(f.vertical_median))
+    std::printf(", vertical disparity on the skin %.2f px (spread %.2f px)", f.vertical_median, f.vertical_spread);
+  std::printf("\n  %s\n", stereo::describeUnknown(m.disparity).c_str());
   for (const auto& w : r.warnings) std::printf("  warning: %s\n", w.c_str());
   std::fflush(stdout);
 }
@@ -58,6 +64,7 @@ int runInduration(const IndurationRun& a) {
   for (const auto& kv : a.sets) induration::setPipelineOption(&opt, kv.first, kv.second);
   opt.validate();  // a bad configuration is refused before the bag is read
   ros_run::IndurationRunner runner(opt, "", ros_run::RunLog::stderrLog("process_bag", a.quiet));
+  if (a.every_frame_maps) runner.keepEveryFrameMaps(a.out);
 
   rosbag::Bag bag;
   ros_io::openForReading(&bag, a.bag);

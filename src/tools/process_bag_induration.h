@@ -16,6 +16,7 @@ struct IndurationRun {
   int frames = -1;
   int ply_step = 2;                                          //!< surface.ply: every ply_step-th pixel
   bool quiet = false;
+  bool every_frame_maps = false;                             //!< also each frame's maps, in out/frames/NNNN/
   std::string ns;                                            //!< bag namespace (ros_io::BagTopics; "" = found)
   std::vector<std::string> command_line;                     //!< for parameters.yaml
 };

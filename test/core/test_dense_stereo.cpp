@@ -48,6 +48,7 @@ using skin3d::stereo::computeDisparity;
 using skin3d::stereo::DenseStereoError;
 using skin3d::stereo::DenseStereoOptions;
 using skin3d::stereo::DisparityMap;
+using skin3d::stereo::DisparitySearch;
 using skin3d::stereo::describeUnknown;
 using skin3d::stereo::UnknownReason;
 using skin3d::stereo::unknownReasonImage;
@@ -383,6 +384,76 @@ SyntheticPair renderPlanePair(cv::Size size, const Plane& p, unsigned seed) {
       s.truth.at<float>(y, x) = static_cast<float>(p(x, y));
     }
   return s;
+}
+
+/** An ideal rectified pair of `size`: fx = 1000 px, baseline 0.1 m, the right principal point `dc` px left of the left
+ *  one (a converged rig rectified without zero-disparity alignment): Z = fx B / (d - dc). */
+std::pair<skin3d::geometry::CameraInfo, skin3d::geometry::CameraInfo> rectifiedPair(cv::Size size, double dc) {
+  skin3d::geometry::CameraInfo li, ri;
+  for (auto* c : {&li, &ri}) {
+    c->width = size.width;
+    c->height = size.height;
+    c->D = {0, 0, 0, 0, 0};
+    c->K << 1000, 0, size.width / 2.0, 0, 1000, size.height / 2.0, 0, 0, 1;
+    c->R.setIdentity();
+    c->P.setZero();
+    c->P.leftCols<3>() = c->K;
+  }
+  ri.P(0, 2) -= dc;
+  ri.P(0, 3) = -1000 * 0.1;
+  return {li, ri};
+}
+
+// The working range found from the images and the calibration alone: on planes at near and far disparities,
+// with and without a principal-point offset (converged rigs), the range holds every true disparity and, in depth,
+// is not wider than the generator's depths widened by the search's margin (10 %) and its 2 coarse pixels.
+TEST(DisparitySearch, FindsTheRangeOfAnyRig) {
+  struct Scene {
+    double d0, a, dc;  // plane d = d0 + a x (px), principal-point offset
+  };
+  const cv::Size size(1280, 720);
+  for (const Scene& sc : {Scene{25, 0.01, 0}, Scene{180, 0.03, 0}, Scene{-410, 0.02, -700}, Scene{520, -0.05, 300}}) {
+    Plane plane;
+    plane.d0 = sc.d0;
+    plane.a = sc.a;
+    plane.b = 0.002;
+    const SyntheticPair pair = renderPlanePair(size, plane, 17);
+    const auto [li, ri] = rectifiedPair(size, sc.dc);
+    double t_lo, t_hi;
+    cv::minMaxLoc(pair.truth, &t_lo, &t_hi);
+    const DisparitySearch s = skin3d::stereo::searchDisparityRange(pair.left, pair.right, li, ri, DenseStereoOptions());
+    std::printf("plane d %.0f ... %.0f px (dc %.0f): searched %.0f ... %.0f, found %.1f ... %.1f px; %s\n", t_lo, t_hi,
+                sc.dc, s.searched_min, s.searched_max, s.min_disparity, s.max_disparity, s.note.c_str());
+    EXPECT_TRUE(s.found) << s.note;
+    EXPECT_LE(s.min_disparity, t_lo) << "d0 " << sc.d0;
+    EXPECT_GE(s.max_disparity, t_hi) << "d0 " << sc.d0;
+    const double fb = 100, z_near = fb / (t_hi - sc.dc), z_far = fb / (t_lo - sc.dc);
+    const double slack = 2 * s.scale + 1;  // px: the search's 2 coarse pixels and its own 1-coarse-pixel error
+    EXPECT_GE(s.min_disparity, fb / (1.1 * z_far) + sc.dc - slack - 0.01 * (t_hi - t_lo)) << "d0 " << sc.d0;
+    EXPECT_LE(s.max_disparity, fb / (z_near / 1.1) + sc.dc + slack + 0.01 * (t_hi - t_lo)) << "d0 " << sc.d0;
+    // the range found lets the matcher measure the plane
+    DenseStereoOptions o;
+    o.min_disparity = s.min_disparity;
+    o.max_disparity = s.max_disparity;
+    const DisparityMap m = computeDisparity(pair.left, pair.right, o);
+    // where the right image holds the left one's point at all: 0 <= x - d(x) < w
+    double shared = 0;
+    for (int x = 0; x < size.width; ++x) shared += (x - plane(x, size.height / 2.0) >= 0 && x - plane(x, size.height / 2.0) < size.width);
+    shared /= size.width;
+    EXPECT_GT(m.valid_fraction, 0.8 * shared) << "d0 " << sc.d0 << ": " << describeUnknown(m);
+  }
+  // a pair with nothing to match: the whole searched range, with a note that says so
+  const cv::Mat flat(size, CV_8U, cv::Scalar(120));
+  const auto [li, ri] = rectifiedPair(size, 0);
+  const DisparitySearch none = skin3d::stereo::searchDisparityRange(flat, flat, li, ri, DenseStereoOptions());
+  EXPECT_FALSE(none.found);
+  EXPECT_NE(none.note.find("searched"), std::string::npos) << none.note;
+  EXPECT_EQ(none.min_disparity, none.searched_min);
+  // images that cannot overlap: depth infinity beyond the image width
+  const auto [la, ra] = rectifiedPair(size, 1250);
+  const SyntheticPair any = renderPlanePair(size, Plane(), 3);
+  EXPECT_THROW(skin3d::stereo::searchDisparityRange(any.left, any.right, la, ra, DenseStereoOptions()),
+               DenseStereoError);
 }
 
 struct SubpixelFigures {

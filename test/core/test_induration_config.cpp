@@ -138,7 +138,7 @@ TEST(IndurationConfig, BadKeysAndValuesAreNamed) {
 TEST(IndurationConfig, ValidateNamesTheKey) {
   EXPECT_NO_THROW(PipelineOptions().validate());
   const std::vector<std::pair<std::string, std::string>> bad = {
-      {"z_min", "0"}, {"z_max", "0.1"}, {"block_size", "4"}, {"refine_window", "8"}, {"max_sigma", "0"}};
+      {"z_min", "-0.1"}, {"z_max", "0.1"}, {"block_size", "4"}, {"refine_window", "8"}, {"max_sigma", "0"}};
   for (const auto& kv : bad) {
     PipelineOptions o;
     setPipelineOption(&o, kv.first, kv.second);  // a number: accepted here, refused by validate()

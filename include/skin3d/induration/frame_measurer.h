@@ -2,7 +2,8 @@
 /**
  * @file frame_measurer.h
  * @brief The induration measurement of one stereo pair as one object: a raw pair and its calibration ->
- * rectification -> dense disparity with its sigma (the depth range from z_min / z_max) -> the organised cloud ->
+ * rectification -> the working depth range (searched in the pair, or z_min / z_max) -> dense disparity with its sigma
+ * -> the organised cloud ->
  * the healthy-skin reference and the plaques. Every door runs this class: the induration nodelet (live) and
  * `process_bag --induration` (offline), configured by one options table (induration::PipelineOptions, the keys of
  * config/induration.yaml); measurementResults() writes the results directory for both.
@@ -29,7 +30,7 @@ struct FrameMeasurement {
   stereo::DisparityMap disparity;    //!< disparity and its sigma, px (NaN unknown)
   stereo::DenseCloud cloud;          //!< organised like the left rectified image, left optical frame
   cv::Mat left_rect;                 //!< the rectified left image (mono8)
-  double seconds_rectify = 0, seconds_match = 0, seconds_triangulate = 0, seconds_measure = 0;
+  double seconds_rectify = 0, seconds_range = 0, seconds_match = 0, seconds_triangulate = 0, seconds_measure = 0;
 };
 
 class FrameMeasurer {
@@ -51,8 +52,8 @@ class FrameMeasurer {
 /**
  * @brief The results directory of a run (every door): induration.yaml (every frame and the repeatability over
  * frames), parameters.yaml (every key's value), and from the last frame height_map.png, surface.ply (every
- * `ply_step`-th pixel), disparity.tiff, disparity_sigma.tiff (px), left_rect.png, unknown_reason.png and
- * height_map.tiff (m). `frames` keeps maps only where given (the last frame's are `last`'s). induration.yaml ends
+ * `ply_step`-th pixel) and its maps (writeFrameMaps: disparity.tiff, disparity_sigma.tiff (px), left_rect.png,
+ * unknown_reason.png, height_map.tiff (m)); a run that keeps every frame's maps has them in frames/NNNN/ too. `frames` keeps maps only where given (the last frame's are `last`'s). induration.yaml ends
  * with frames_dropped and dropped_input (what the door dropped before measuring, by fault).
  * @throws std::runtime_error naming the file that cannot be written.
  */
@@ -61,6 +62,16 @@ void writeMeasurementResults(const std::string& dir, const std::vector<FrameReco
                              const std::string& frame_id, const std::string& source,
                              const std::vector<std::string>& command_line, int frames_dropped = 0,
                              const std::string& dropped_input = "none", int ply_step = 2);
+
+/**
+ * @brief The maps of one frame into `dir` (created with its parents): height_map.png (picture), height_map.tiff (m,
+ * NaN unknown), disparity.tiff and disparity_sigma.tiff (px), left_rect.png, unknown_reason.png.
+ * @throws std::runtime_error naming the file that cannot be written.
+ */
+void writeFrameMaps(const std::string& dir, const FrameMeasurement& m);
+
+/** @brief Where a run that keeps every frame's maps writes frame `index` (0-based): RESULTS/frames/0007. */
+std::string frameMapsDirectory(const std::string& results, int index);
 
 }  // namespace induration
 }  // namespace skin3d

@@ -4,7 +4,7 @@
  * (process_bag, dense_stereo tool), the dense_stereo / induration nodelets' ROS parameters and the tests,
  * so that a key means the same everywhere. Keys and defaults are documented in config/induration.yaml.
  *
- * Keys (flat): z_min, z_max (m, working depth range -> disparity range), roi (x y w h in px, "" or
+ * Keys (flat): z_min, z_max (m, working depth range -> disparity range; both 0: searched in each pair), roi (x y w h in px, "" or
  * "0 0 0 0" = whole image), every DenseStereoOptions field but min/max_disparity and roi under its own
  * name (coarse_max_width, sgbm_mode, block_size, p1, p2, uniqueness_ratio, lr_max_diff, speckle_window,
  * speckle_range, slant_passes, subpixel, refine_window, refine_iterations, refine_max_shift, max_sigma, min_texture, min_correlation, weak_texture,
@@ -26,8 +26,11 @@ namespace skin3d {
 namespace induration {
 
 struct PipelineOptions {
-  double z_min = 0.18;   //!< m, nearest working depth (rectified left camera axis); the Part I rig works at ~0.25
-  double z_max = 0.40;   //!< m, farthest (a wider range costs time and memory in the matcher)
+  /** m, the working depth range (rectified left camera axis) -> the disparity range. Both 0 (the default): found
+   *  in each pair by stereo::searchDisparityRange, from the images and the calibration alone (any rig). */
+  double z_min = 0;
+  double z_max = 0;
+  bool autoDepthRange() const { return z_min == 0 && z_max == 0; }
   stereo::DenseStereoOptions dense;
   IndurationOptions induration;
   void validate() const;  //!< throws std::invalid_argument naming the key

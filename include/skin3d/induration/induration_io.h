@@ -9,6 +9,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,13 @@ struct FrameRecord {
   double stamp = 0;               //!< s
   IndurationResult result;        //!< height_map / labels may be empty (not written to YAML)
   double valid_fraction = 0;      //!< known disparity / ROI
+  double z_near = 0, z_far = 0;   //!< m: the working depth range matched (searched or set; z_far may be infinite)
+  double min_disparity = 0, max_disparity = 0;  //!< px: its disparity range
+  bool range_searched = false;    //!< the range was searched in this pair (z_min = z_max = 0)
+  /** px: the vertical disparity (y_right - y_left) the matcher fitted on the measured surface, its median and robust
+   *  spread (1.4826 MAD): rectification error, unsynchronised or rolling-shutter frames show here (NaN: none). */
+  double vertical_median = std::numeric_limits<double>::quiet_NaN();
+  double vertical_spread = std::numeric_limits<double>::quiet_NaN();
   double seconds = 0;             //!< processing time of the frame
 };
 

@@ -56,6 +56,10 @@ class IndurationRunner {
   bool save(const std::string& dir, std::string* message, const std::vector<std::string>& command_line = {},
             const std::string& source = "", const InputLedger* upstream = nullptr);
 
+  /** @brief Also writes each frame's maps, as it is measured, to frameMapsDirectory(dir, index) (empty: only the
+   *  last frame's, with the results). A frame whose maps cannot be written is still measured (the log says why). */
+  void keepEveryFrameMaps(const std::string& dir);
+
   int frames() const;
   InputLedger ledger() const;
   /** @brief The last frame's measurement (for process_bag's table), or nullptr. */
@@ -75,6 +79,7 @@ class IndurationRunner {
   std::vector<induration::FrameRecord> frames_;  // every frame; maps only in the last (last_)
   std::unique_ptr<induration::FrameMeasurement> last_;
   bool unsaved_ = false;
+  std::string every_frame_maps_;  // results directory of every frame's maps (empty: the last frame's only)
 
   // live only
   bool attached_ = false;

@@ -157,6 +157,41 @@ cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left);
 std::pair<double, double> disparityRangeForDepth(const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                                  double z_min, double z_max);
 
+/** @brief How searchDisparityRange looks for the working range. */
+struct DisparitySearchOptions {
+  int width = 320;            //!< px: the pair is halved until at most this wide for the search
+  double percentile = 1.0;    //!< %: the range is the shortest interval holding all but twice this share of the matches
+  double depth_margin = 0.1;  //!< the depths of those percentiles widened by this share (nearer / farther)
+  double min_matched = 0.02;  //!< under this share of the image matched, the search has found nothing
+  double min_correlation = 0.7;  //!< a match counts when its 11 x 11 windows (reduced scale) correlate this well
+};
+
+/** @brief The working disparity range a search found (searchDisparityRange). */
+struct DisparitySearch {
+  bool found = false;  //!< enough of the image matched (else the range is everything searched, and `note` says so)
+  double min_disparity = 0, max_disparity = 0;  //!< px at full resolution: the range to match
+  double z_near = 0, z_far = 0;                 //!< m along the rectified axis (z_far may be infinite)
+  double searched_min = 0, searched_max = 0;    //!< px: the disparities searched (all both images can share)
+  double matched_fraction = 0;                  //!< share of the (coarse) roi matched
+  int scale = 1;                                //!< downsampling of the search
+  std::string note;                             //!< one line for logs and reports
+};
+
+/**
+ * @brief The working disparity range of a rectified pair, found from the images and the calibration alone: the
+ * pair is reduced to about `width` px and matched (the matcher's semi-global level with its own checks: left-right,
+ * uniqueness, weak texture) over every disparity both images can share (|d| < 0.9 w, in front of the rig); the
+ * range is the shortest interval holding 98 % of the matches (mismatches of the wide search fall outside), widened by
+ * `depth_margin` in depth and 2 coarse pixels. A
+ * rig at any distance, baseline and convergence thus needs no depth range set by hand; a pair that matches under
+ * `min_matched` gets the whole searched range (found = false).
+ * @throws DenseStereoError for empty or mismatched images, a calibration that is not a horizontal rectified pair,
+ *         or images that cannot overlap.
+ */
+DisparitySearch searchDisparityRange(const cv::Mat& left, const cv::Mat& right, const geometry::CameraInfo& left_info,
+                                     const geometry::CameraInfo& right_info, const DenseStereoOptions& base,
+                                     const DisparitySearchOptions& search = DisparitySearchOptions());
+
 /** @brief Organised point cloud of a disparity map (geometry/dense_cloud.h). */
 using DenseCloud = geometry::DenseCloud;
 

@@ -2,7 +2,10 @@
 // The induration measurement of one stereo pair as one object (see include/skin3d/induration/frame_measurer.h).
 #include "skin3d/induration/frame_measurer.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <yaml-cpp/yaml.h>
@@ -14,6 +17,39 @@
 
 namespace skin3d {
 namespace induration {
+
+namespace {
+
+/** The fitted vertical disparity over the known pixels (every 4th row and column): median and 1.4826 MAD, px; a
+ *  warning when the rows of the pair do not meet (more than 0.5 px off, or spread over more than 0.5 px). */
+void verticalDisparity(const stereo::DisparityMap& map, FrameRecord* r) {
+  if (map.vertical.empty()) return;
+  std::vector<float> v;
+  for (int y = 0; y < map.vertical.rows; y += 4) {
+    const float* p = map.vertical.ptr<float>(y);
+    for (int x = 0; x < map.vertical.cols; x += 4)
+      if (std::isfinite(p[x])) v.push_back(p[x]);
+  }
+  if (v.size() < 20) return;
+  const auto median = [](std::vector<float>& a) {
+    auto k = a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2);
+    std::nth_element(a.begin(), k, a.end());
+    return static_cast<double>(*k);
+  };
+  r->vertical_median = median(v);
+  for (float& x : v) x = std::fabs(x - static_cast<float>(r->vertical_median));
+  r->vertical_spread = 1.4826 * median(v);
+  if (std::fabs(r->vertical_median) > 0.5 || r->vertical_spread > 0.5) {
+    char buf[320];
+    std::snprintf(buf, sizeof buf,
+                  "the rows of the rectified pair do not meet on the skin: vertical disparity %.2f px (median), "
+                  "spread %.2f px (a stale calibration, unsynchronised or rolling-shutter frames?)",
+                  r->vertical_median, r->vertical_spread);
+    r->result.warnings.push_back(buf);
+  }
+}
+
+}  // namespace
 
 FrameMeasurer::FrameMeasurer(const PipelineOptions& options) : options_(options) { options_.validate(); }
 
@@ -28,10 +64,27 @@ FrameMeasurement FrameMeasurer::measure(const cv::Mat& left_raw, const cv::Mat& 
   m.left_rect = rect.first;
   m.seconds_rectify = since(t0);
   stereo::DenseStereoOptions d = options_.dense;
-  const auto range = stereo::disparityRangeForDepth(left, right, options_.z_min, options_.z_max);
-  d.min_disparity = range.first;
-  d.max_disparity = range.second;
   auto t1 = Clock::now();
+  std::string range_note;
+  if (options_.autoDepthRange()) {  // from the images and the calibration: any rig
+    const stereo::DisparitySearch s = stereo::searchDisparityRange(rect.first, rect.second, left, right, d);
+    d.min_disparity = s.min_disparity;
+    d.max_disparity = s.max_disparity;
+    m.record.z_near = s.z_near;
+    m.record.z_far = s.z_far;
+    m.record.range_searched = true;
+    if (!s.found) range_note = s.note;
+  } else {
+    const auto range = stereo::disparityRangeForDepth(left, right, options_.z_min, options_.z_max);
+    d.min_disparity = range.first;
+    d.max_disparity = range.second;
+    m.record.z_near = options_.z_min;
+    m.record.z_far = options_.z_max;
+  }
+  m.record.min_disparity = d.min_disparity;
+  m.record.max_disparity = d.max_disparity;
+  m.seconds_range = since(t1);
+  t1 = Clock::now();
   m.disparity = stereo::computeDisparity(rect.first, rect.second, d);
   m.seconds_match = since(t1);
   t1 = Clock::now();
@@ -43,7 +96,9 @@ FrameMeasurement FrameMeasurer::measure(const cv::Mat& left_raw, const cv::Mat& 
   m.seconds_measure = since(t1);
   for (const auto& w : m.disparity.warnings)
     m.record.result.warnings.insert(m.record.result.warnings.begin(), "dense stereo: " + w);
+  if (!range_note.empty()) m.record.result.warnings.insert(m.record.result.warnings.begin(), "dense stereo: " + range_note);
   m.record.valid_fraction = m.disparity.valid_fraction;  // known disparity / the matched region
+  verticalDisparity(m.disparity, &m.record);
   m.record.seconds = since(t0);
   return m;
 }
@@ -65,19 +120,30 @@ void writeMeasurementResults(const std::string& dir, const std::vector<FrameReco
     f << y.c_str() << "\n";
     if (!f) throw std::runtime_error("cannot write " + dir + "/induration.yaml");
   }
-  const IndurationResult& r = last.record.result;
+  writeSurfacePly(dir + "/surface.ply", last.cloud, last.left_rect, ply_step);
+  writeFrameMaps(dir, last);
+}
+
+void writeFrameMaps(const std::string& dir, const FrameMeasurement& m) {
+  std::filesystem::create_directories(dir);
+  const IndurationResult& r = m.record.result;
   auto write = [&](const std::string& name, const cv::Mat& img) {
     if (img.empty()) return;
     if (!cv::imwrite(dir + "/" + name, img)) throw std::runtime_error("cannot write " + dir + "/" + name);
   };
   if (!r.height_map.empty()) write("height_map.png", heightMapImage(r.height_map, r.labels, r.plaques));
-  writeSurfacePly(dir + "/surface.ply", last.cloud, last.left_rect, ply_step);
-  // the last frame's matching, for checking the matcher: disparity and its sigma (px, NaN unknown), left image
-  write("disparity.tiff", last.disparity.disparity);
-  write("disparity_sigma.tiff", last.disparity.sigma);
-  write("left_rect.png", last.left_rect);
-  if (!last.left_rect.empty()) write("unknown_reason.png", stereo::unknownReasonImage(last.disparity, last.left_rect));
+  // the matching, for checking the matcher: disparity and its sigma (px, NaN unknown), left image
+  write("disparity.tiff", m.disparity.disparity);
+  write("disparity_sigma.tiff", m.disparity.sigma);
+  write("left_rect.png", m.left_rect);
+  if (!m.left_rect.empty()) write("unknown_reason.png", stereo::unknownReasonImage(m.disparity, m.left_rect));
   write("height_map.tiff", r.height_map);
+}
+
+std::string frameMapsDirectory(const std::string& results, int index) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frames/%04d", index);
+  return results + "/" + name;
 }
 
 }  // namespace induration

@@ -125,8 +125,11 @@ void require(bool ok, const std::string& key, const std::string& why) {
 }  // namespace
 
 void PipelineOptions::validate() const {
-  require(z_min > 0 && std::isfinite(z_min), "z_min", num(z_min) + " must be > 0 (m)");
-  require(z_max > z_min && std::isfinite(z_max), "z_max", num(z_max) + " must be > z_min = " + num(z_min) + " (m)");
+  if (!autoDepthRange()) {  // both 0: searched in each pair
+    require(z_min > 0 && std::isfinite(z_min), "z_min", num(z_min) + " must be > 0 (m), or z_min = z_max = 0 (searched)");
+    require(z_max > z_min && std::isfinite(z_max), "z_max",
+            num(z_max) + " must be > z_min = " + num(z_min) + " (m), or z_min = z_max = 0 (searched)");
+  }
   const cv::Rect& r = dense.roi;
   require(r.x >= 0 && r.y >= 0 && r.width >= 0 && r.height >= 0 && ((r.width == 0) == (r.height == 0)), "roi",
           "must be \"x y w h\" with x, y >= 0 and w, h both > 0 (or \"0 0 0 0\" for the whole image)");

@@ -363,6 +363,15 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
     y << YAML::Key << "stamp" << YAML::Value << YAML::Precision(17) << f.stamp;
     y << YAML::Key << "seconds" << YAML::Value << f.seconds;
     y << YAML::Key << "valid_fraction" << YAML::Value << f.valid_fraction;
+    y << YAML::Key << "depth_range_m" << YAML::Value << YAML::Flow << YAML::BeginSeq << f.z_near
+      << (std::isfinite(f.z_far) ? f.z_far : -1.0) << YAML::EndSeq;
+    y << YAML::Key << "disparity_range_px" << YAML::Value << YAML::Flow << YAML::BeginSeq << f.min_disparity
+      << f.max_disparity << YAML::EndSeq;
+    y << YAML::Key << "depth_range" << YAML::Value << (f.range_searched ? "searched" : "set");
+    if (std::isfinite(f.vertical_median))
+      y << YAML::Key << "vertical_disparity_px" << YAML::Value << YAML::BeginMap << YAML::Key << "median"
+        << YAML::Value << f.vertical_median << YAML::Key << "spread" << YAML::Value << f.vertical_spread
+        << YAML::EndMap;
     y << YAML::Key << "known_points" << YAML::Value << r.known_points;
     y << YAML::Key << "outliers_removed" << YAML::Value << r.outliers_removed;
     y << YAML::Key << "smoothing_px" << YAML::Value << r.smoothing_px;

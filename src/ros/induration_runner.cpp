@@ -9,6 +9,7 @@
 #include <skin3d/IndurationReport.h>
 #include <skin3d/SaveResults.h>
 
+#include <cmath>
 #include <cstdio>
 
 #include "skin3d/ros/conversions.h"
@@ -32,6 +33,13 @@ IndurationRunner::~IndurationRunner() {
 void IndurationRunner::keepEveryFrameMaps(const std::string& dir) {
   std::lock_guard<std::mutex> lock(mutex_);
   every_frame_maps_ = dir;
+}
+
+int IndurationRunner::framesNotFollowed() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  int n = 0;
+  for (const auto& f : frames_) n += f.result.reference_ok && !f.result.reference_follows;
+  return n;
 }
 
 int IndurationRunner::frames() const {
@@ -129,12 +137,18 @@ void IndurationRunner::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s) 
     s.summary(diagnostic_msgs::DiagnosticStatus::WARN, ledger_.lastError());
   else if (n == 0)
     s.summary(diagnostic_msgs::DiagnosticStatus::OK, "waiting for stereo pairs");
+  else if (frames_.back().result.reference_ok && !frames_.back().result.reference_follows)
+    s.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+              "the reference does not follow the skin over " +
+                  std::to_string(static_cast<int>(std::lround(100 * frames_.back().result.unfollowed_share))) +
+                  " % of the working band: plaques there cannot be measured");
   else
     s.summary(diagnostic_msgs::DiagnosticStatus::OK, "measuring");
   s.add("frames", n);
   s.add("frame rate (Hz)", status_.rate());
   s.add("s per frame (last)", n ? frames_.back().seconds : 0.0);
   s.add("plaques (last frame)", n ? static_cast<int>(frames_.back().result.plaques.size()) : 0);
+  s.add("reference follows the skin (last frame)", n ? frames_.back().result.reference_follows : true);
   s.add("dropped", ledger_.dropped());
   s.add("dropped by fault", ledger_.summary());
 }

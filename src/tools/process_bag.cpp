@@ -80,7 +80,10 @@ const char* kUsage =
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
     "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n"
     "  --maps       with --induration: last (default: the last frame's maps) | all (every frame's too, in\n"
-    "               DIR/frames/NNNN/ as it is measured)\n";
+    "               DIR/frames/NNNN/ as it is measured)\n"
+    "exit status: 0 done; 1 bad data (nothing could be processed); 2 bad command line; 3 the results could not be\n"
+    "  written (or the bag not read); 4 (--induration) results written, but in some frame the healthy-skin reference\n"
+    "  did not follow the skin: plaques there could not be measured (the warnings and the hatched height map say where)\n";
 
 /** A strict whole number for `option`, or exit 2 with the message naming it. */
 long whole(const std::string& option, const std::string& v, long min, long max) {

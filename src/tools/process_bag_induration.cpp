@@ -110,6 +110,13 @@ int runInduration(const IndurationRun& a) {
   std::string message;
   if (!runner.save(a.out, &message, a.command_line, a.bag, &pairs_ledger)) throw std::runtime_error(message);
   if (!a.quiet) printTable(*runner.last(), runner.frames(), dropped.dropped(), a.out);
+  if (const int n = runner.framesNotFollowed()) {
+    std::fprintf(stderr,
+                 "process_bag: in %d of %d frames the healthy-skin reference did not follow the skin: plaques there "
+                 "could not be measured (the warnings and the hatched height map say where); exit status 4\n",
+                 n, runner.frames());
+    return 4;
+  }
   return 0;
 }
 

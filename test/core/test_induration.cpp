@@ -35,6 +35,7 @@ struct Scene {
   Eigen::Vector3d origin = Eigen::Vector3d(0, 0, 0.25);  // surface point on the optical axis
   Eigen::Vector3d normal, e1, e2;                         // normal towards the camera
   double curvature = 0.0;                                 // 1/m: height offset 0.5 c (u^2 + v^2) along the normal
+  double ridge = 0.0, ridge_width = 0.006, ridge_u = 0.0; // m: a ridge along v (a nose, a fold): ridge exp(-du^2/2w^2)
   std::vector<Box> boxes;
   std::vector<Round> rounds;
   double noise = 5e-6;                                    // m along the ray
@@ -52,6 +53,7 @@ struct Scene {
   }
   double surface(double u, double v) const {  // height above the base plane (m)
     double h = 0.5 * curvature * (u * u + v * v);
+    if (ridge != 0) h += ridge * std::exp(-0.5 * (u - ridge_u) * (u - ridge_u) / (ridge_width * ridge_width));
     for (const auto& b : boxes)
       if (std::fabs(u - b.u) <= b.half && std::fabs(v - b.v) <= b.half) h += b.height;
     for (const auto& r : rounds) h += r.at(u, v);
@@ -111,6 +113,7 @@ TEST(Induration, PlaquesOnATiltedPlane) {
   ASSERT_TRUE(r.reference_ok);
   for (const auto& c : r.reference.candidates) std::printf("candidate %s: %.2f um\n", c.first.c_str(), c.second * 1e6);
   EXPECT_EQ(r.reference.model, "plane") << "a plane is a plane";
+  EXPECT_TRUE(r.reference_follows) << "unfollowed share " << r.unfollowed_share;
   EXPECT_GT(r.outliers_removed, 0);
   EXPECT_LT(r.reference.rms, 3 * s.noise);
   EXPECT_GT(std::fabs(r.reference.normal.dot(s.normal)), 0.9999);
@@ -159,8 +162,61 @@ TEST(Induration, CurvedSkinNeedsTheQuadraticReference) {
   ASSERT_TRUE(ra.reference_ok);
   for (const auto& c : ra.reference.candidates) std::printf("candidate %s: %.2f um\n", c.first.c_str(), c.second * 1e6);
   EXPECT_EQ(ra.reference.model, "quadric");
+  EXPECT_TRUE(ra.reference_follows) << "unfollowed share " << ra.unfollowed_share;
   ASSERT_EQ(ra.plaques.size(), 1u);
   EXPECT_NEAR(ra.plaques[0].mean_height, 0.3e-3, 0.01e-3);
+}
+
+// A surface no reference model follows: skin with a ridge 3 mm high and 12 mm wide (a nose, a fold), plaques beside
+// it and on its flank. The reference must say so (reference_follows false, the regions in `unfollowed` and a
+// warning), never "no plaque" as if the skin were clean; a plaque on flat skin away from the ridge is still measured
+// right, and one on the ridge's flank is measured right or lies in the region marked.
+TEST(Induration, ASurfaceTheReferenceCannotFollowIsReported) {
+  Scene s;
+  s.ridge = 3e-3;
+  s.ridge_u = 0.012;
+  const Round flat{-0.02, 0.0, 0.005, 0.3e-3, 0.001, 0.0}, flank{0.012 - 0.008, 0.012, 0.004, 0.3e-3, 0.001, 0.0};
+  s.rounds = {flat, flank};
+  const auto r = measureInduration(s.cloud(), IndurationOptions());
+  ASSERT_TRUE(r.reference_ok);
+  std::printf("reference %s: follows %d, unfollowed %.1f %% of the band, noise ratio %.1f\n", r.reference.model.c_str(),
+              r.reference_follows, 100 * r.unfollowed_share, r.reference_noise_ratio);
+  for (const auto& w : r.warnings) std::printf("warning: %s\n", w.c_str());
+  EXPECT_FALSE(r.reference_follows);
+  EXPECT_GT(r.unfollowed_share, 0.02);
+  ASSERT_FALSE(r.unfollowed.empty());
+  bool said = false, clean = false;
+  for (const auto& w : r.warnings) {
+    said |= w.find("does not follow the skin") != std::string::npos;
+    clean |= w.find("no plaque stands") != std::string::npos;
+  }
+  EXPECT_TRUE(said) << "no warning names the regions the reference does not follow";
+  EXPECT_FALSE(clean) << "'no plaque' on a surface the reference did not follow";
+  // the plaques: measured right (top within 2 % + 5 um), or in the region marked
+  const auto pixelOf = [&](const Round& p) {
+    const Eigen::Vector3d c = s.origin + p.u * s.e1 + p.v * s.e2 + s.surface(p.u, p.v) * s.normal;
+    return cv::Point(static_cast<int>(std::lround(s.f * c.x() / c.z() + s.width / 2.0)),
+                     static_cast<int>(std::lround(s.f * c.y() / c.z() + s.height / 2.0)));
+  };
+  for (const Round& p : {flat, flank}) {
+    const cv::Point px = pixelOf(p);
+    ASSERT_TRUE(cv::Rect(0, 0, s.width, s.height).contains(px));
+    const int id = r.labels.at<int>(px);
+    bool marked = false;
+    for (int dy = -15; dy <= 15 && !marked; ++dy)
+      for (int dx = -15; dx <= 15 && !marked; ++dx) {
+        const cv::Point q = px + cv::Point(dx, dy);
+        marked = cv::Rect(0, 0, s.width, s.height).contains(q) && r.unfollowed.at<uchar>(q) != 0;
+      }
+    const induration::Plaque* found = nullptr;
+    for (const auto& pl : r.plaques)
+      if (pl.id == id) found = &pl;
+    const bool right = found && std::fabs(found->top_height - p.height) <= 0.02 * p.height + 5e-6;
+    std::printf("plaque at u = %.0f mm: %s, top %.3f mm (true %.3f), in the marked region: %d\n", p.u * 1e3,
+                found ? "found" : "not found", found ? found->top_height * 1e3 : 0.0, p.height * 1e3, marked);
+    EXPECT_TRUE(right || marked) << "plaque at u = " << p.u << ": neither measured right nor marked";
+    if (&p == &flat) EXPECT_TRUE(right) << "the plaque on flat skin away from the ridge";
+  }
 }
 
 TEST(Induration, TopHeightOfFlatAndDomedPlaques) {

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: BSD-3-Clause
 """The bad-input matrix: faulty bags and command lines through every door, one JUnit test case per (door, case).
 
-usage: check_bad_input.py [--bin DIR] [--data DIR] [--door process_bag|launch ...] [--only NAME ...] [--list] [--keep DIR]
+usage: check_bad_input.py [--bin DIR] [--data DIR] [--door process_bag|launch ...] [--only NAME ...] [--list] [--keep DIR] [--jobs N]
                           [--xunit FILE.xml]
 
 From two small good bags (made by make_dataset: the 10-frame rendered globe with imu/data, and the 2-frame
@@ -27,8 +27,10 @@ entry says how and why (--list shows it).
 
 --bin: the folder of process_bag and make_dataset (default: build/devel/lib/skin3d of the source tree).
 --keep DIR: keep every faulty bag and results directory there (for reading a failure).
+--jobs N: the launch door runs N cases at once (each with its own master and ROS_HOME; the CI runs 2).
 """
 import argparse
+import concurrent.futures
 import math
 import os
 import re
@@ -558,7 +560,11 @@ def main():
     ap.add_argument("--list", action="store_true")
     ap.add_argument("--keep", default="")
     ap.add_argument("--xunit")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="cases of the launch door run at once (each has its own master; process_bag's run one by one)")
     a = ap.parse_args()
+    if a.jobs < 1:
+        ap.error("--jobs must be >= 1")
     table = cases()
     if a.only:
         unknown = [n for n in a.only if n not in {c.name for c in table}]
@@ -577,9 +583,9 @@ def main():
         os.makedirs(tmp, exist_ok=True)
         bags = good_bags(a.data, a.bin, tmp)
         for door in doors:
-            for c in table:
-                if hasattr(door, "expect") and door.expect(c) is None:
-                    continue
+            todo = [c for c in table if not (hasattr(door, "expect") and door.expect(c) is None)]
+
+            def one(c, door=door):
                 t0 = time.time()
                 folder = os.path.join(tmp, door.name, c.name)
                 shutil.rmtree(folder, ignore_errors=True)
@@ -587,10 +593,14 @@ def main():
                     msg = check_case(door, c, bags, folder)
                 except Exception as e:  # a broken case must not hide the others
                     msg = "the check itself failed: %r" % e
-                results.append(("%s.%s" % (door.name, c.name), msg))
                 print("bad_input: %s.%s: %s (%.1f s)" % (door.name, c.name, "FAIL: " + msg if msg else "ok",
                                                         time.time() - t0), flush=True)
-                sys.stdout.flush()
+                return ("%s.%s" % (door.name, c.name), msg)
+
+            # the launch door's cases mostly wait (roslaunch, the master, the player): a few at once
+            jobs = a.jobs if door.name == "launch" else 1
+            with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+                results.extend(pool.map(one, todo))
     finally:
         if not a.keep:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -51,6 +51,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -155,6 +156,15 @@ struct IndurationResult {
   double smoothing_px = 0;         //!< px: the segmentation smoothing chosen (see max_smoothing_px)
   double band_fraction = 1;        //!< share of the known points within the working band (max_incidence_deg)
   double detection_threshold = 0;  //!< m: max(min_height, 3 robust sigma of the smoothed healthy-skin heights)
+  /** Whether the reference follows the skin: false when more than 2 % of the working band (outside the plaques) lies
+   *  beyond the detection threshold above or below it in regions of at least min_area; no plaque can be measured
+   *  there, and a warning names the regions. */
+  bool reference_follows = true;
+  double unfollowed_share = 0;     //!< that share of the working band
+  cv::Mat unfollowed;              //!< CV_8U: 255 where it does not follow (empty: nowhere)
+  /** The healthy skin's robust scatter about the reference over the matcher's median stated depth sigma (1: the
+   *  reference explains the skin down to the noise; skin relief and model error raise it). */
+  double reference_noise_ratio = std::numeric_limits<double>::quiet_NaN();
 };
 
 /** @brief PASImeter class of a height (m) with the given increasing boundaries (m). */

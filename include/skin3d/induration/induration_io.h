@@ -50,11 +50,12 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
  * highest plaque's max height, or with no plaque the 99th percentile of the known heights; at least 0.25 mm)
  * in a perceptual colour map, unknown pixels dark
  * grey, plaque outlines (labels CV_32S, may be empty) in white with their id and mean height in mm, and a
- * vertical colour scale bar labelled in mm. Wide maps are shrunk to at most `max_width` px.
+ * vertical colour scale bar labelled in mm; `unfollowed` (CV_8U, may be empty): hatched in magenta, where the reference
+ * does not follow the skin. Wide maps are shrunk to at most `max_width` px.
  * @return 8-bit BGR image.
  */
 cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const std::vector<Plaque>& plaques,
-                       double max_mm = 0.0, int max_width = 1600);
+                       double max_mm = 0.0, int max_width = 1600, const cv::Mat& unfollowed = cv::Mat());
 
 /**
  * @brief Writes the organised cloud as a binary little-endian PLY triangle mesh (vertex x y z float in m,

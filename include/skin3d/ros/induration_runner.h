@@ -61,6 +61,8 @@ class IndurationRunner {
   void keepEveryFrameMaps(const std::string& dir);
 
   int frames() const;
+  /** @brief Frames whose healthy-skin reference did not follow the skin (IndurationResult::reference_follows). */
+  int framesNotFollowed() const;
   InputLedger ledger() const;
   /** @brief The last frame's measurement (for process_bag's table), or nullptr. */
   const induration::FrameMeasurement* last() const { return last_ ? &*last_ : nullptr; }

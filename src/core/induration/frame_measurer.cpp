@@ -131,7 +131,8 @@ void writeFrameMaps(const std::string& dir, const FrameMeasurement& m) {
     if (img.empty()) return;
     if (!cv::imwrite(dir + "/" + name, img)) throw std::runtime_error("cannot write " + dir + "/" + name);
   };
-  if (!r.height_map.empty()) write("height_map.png", heightMapImage(r.height_map, r.labels, r.plaques));
+  if (!r.height_map.empty())
+    write("height_map.png", heightMapImage(r.height_map, r.labels, r.plaques, 0.0, 1600, r.unfollowed));
   // the matching, for checking the matcher: disparity and its sigma (px, NaN unknown), left image
   write("disparity.tiff", m.disparity.disparity);
   write("disparity_sigma.tiff", m.disparity.sigma);

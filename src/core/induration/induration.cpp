@@ -114,7 +114,13 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
   res.detection_threshold = detectionThreshold(hs, s.known_mask & ~best.plaque_mask & band, o.min_height, o.ransac_threshold);
   findPlaques(s, hs, band, reach, res.detection_threshold, best.smoothing, res);
-  if (res.plaques.empty()) res.warnings.push_back("no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference");
+  checkReferenceFollows(s, hs, band, res);
+  if (res.plaques.empty())
+    res.warnings.push_back(res.reference_follows
+                               ? "no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference"
+                               : "no plaque found where the reference follows the skin (" +
+                                     num(std::round(1000 * (1 - res.unfollowed_share)) / 10) +
+                                     " % of the working band); the rest cannot be measured");
   return res;
 }
 

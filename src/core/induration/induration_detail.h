@@ -80,6 +80,13 @@ cv::Mat holesOf(const cv::Mat& mask);
 Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::Mat& known, const cv::Mat& h, double edge, int max_gap);
 cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area);
 
+// ---- induration_follow.cpp
+/** Above this share of the working band departing from the reference, the reference does not follow the skin. */
+constexpr double kMaxUnfollowedShare = 0.02;
+/** Whether the reference follows the skin (res.reference_follows, unfollowed_share, unfollowed, reference_noise_ratio),
+ *  after findPlaques; a warning names the regions where it does not. */
+void checkReferenceFollows(const Surface& s, const cv::Mat& hs, const cv::Mat& band, IndurationResult& res);
+
 // ---- induration_reference.cpp
 /** The starting plane: RANSAC on a subsample of about 20000 points (normal towards the camera side). */
 bool ransacStart(const Surface& s, ReferenceSurface* ref);

@@ -100,6 +100,11 @@ void emitReference(YAML::Emitter& y, const IndurationResult& r) {
   y << YAML::Key << "d" << YAML::Value << s.d;
   y << YAML::Key << "rms_mm" << YAML::Value << kMm * s.rms;
   y << YAML::Key << "points" << YAML::Value << s.points;
+  // whether it follows the skin: the share of the working band beyond the detection threshold off it, and its
+  // healthy-skin scatter over the matcher's stated noise
+  y << YAML::Key << "follows_skin" << YAML::Value << r.reference_follows;
+  y << YAML::Key << "unfollowed_share" << YAML::Value << r.unfollowed_share;
+  if (std::isfinite(r.reference_noise_ratio)) y << YAML::Key << "noise_ratio" << YAML::Value << r.reference_noise_ratio;
   y << YAML::Key << "candidates" << YAML::Value << YAML::BeginSeq;  // every model tried, robust scale of its healthy residuals
   for (const auto& c : s.candidates)
     y << YAML::Flow << YAML::BeginMap << YAML::Key << "model" << YAML::Value << c.first << YAML::Key << "scale_mm"
@@ -408,7 +413,7 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
 // Throws std::invalid_argument for a map that is not CV_32F, labels of another size or type, max_mm < 0, or a
 // max_width too small for the scale bar.
 cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const std::vector<Plaque>& plaques,
-                       double max_mm, int max_width) {
+                       double max_mm, int max_width, const cv::Mat& unfollowed) {
   if (!(max_mm >= 0) || !std::isfinite(max_mm))
     throw std::invalid_argument("heightMapImage: max_mm must be >= 0 (0 = automatic), got " + std::to_string(max_mm));
   if (max_width < kPanelWidth + 100)
@@ -464,6 +469,17 @@ cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const s
   cv::Mat map_colour;
   cv::applyColorMap(index, map_colour, kColourMap);
   map_colour.setTo(kUnknown, unknown);
+  if (!unfollowed.empty()) {  // where the reference does not follow the skin: magenta hatching
+    if (unfollowed.type() != CV_8UC1 || unfollowed.size() != height_map.size())
+      throw std::invalid_argument("heightMapImage: the unfollowed mask must be CV_8U of the height map's size");
+    const int period = std::max(8, height_map.cols / 120);
+    for (int r = 0; r < height_map.rows; ++r) {
+      const uchar* u = unfollowed.ptr<uchar>(r);
+      cv::Vec3b* c = map_colour.ptr<cv::Vec3b>(r);
+      for (int x = 0; x < height_map.cols; ++x)
+        if (u[x] && (x + r) % period < std::max(2, period / 4)) c[x] = cv::Vec3b(255, 0, 255);
+    }
+  }
 
   // Shrink wide maps so that map + scale bar panel fit in max_width.
   const double s = std::min(1.0, static_cast<double>(max_width - kPanelWidth) / height_map.cols);
@@ -514,8 +530,11 @@ cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const s
 
   // Title line and the scale bar.
   char title[160];
-  std::snprintf(title, sizeof(title), "height above the reference, 0 - %.2f mm  |  %zu plaque%s  |  grey: unknown",
-                max_mm, plaques.size(), plaques.size() == 1 ? "" : "s");
+  std::snprintf(title, sizeof(title), "height above the reference, 0 - %.2f mm  |  %zu plaque%s  |  grey: unknown%s",
+                max_mm, plaques.size(), plaques.size() == 1 ? "" : "s",
+                cv::countNonZero(unfollowed.empty() ? cv::Mat(1, 1, CV_8U, cv::Scalar(0)) : unfollowed) > 0
+                    ? "  |  hatched: the reference does not follow the skin"
+                    : "");
   cv::putText(canvas, title, {6, 19}, cv::FONT_HERSHEY_SIMPLEX, 0.5, kWhite, 1, cv::LINE_AA);
   drawScaleBar(canvas, map_w + 14, kTitleHeight + 24, canvas.rows - 12, max_mm);
   return canvas;

@@ -113,6 +113,12 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
 
   // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
   res.detection_threshold = detectionThreshold(hs, s.known_mask & ~best.plaque_mask & band, o.min_height, o.ransac_threshold);
+  if (res.detection_threshold > 2 * o.min_height)  // the noise, not min_height, sets the smallest plaque found
+    res.warnings.push_back("the height noise of this view only lets plaques higher than " +
+                           num(std::round(res.detection_threshold * 1e5) / 100) + " mm be found (3 robust sigma of the "
+                           "healthy skin's heights after " + num(best.smoothing) + " px of smoothing; min_height is " +
+                           num(o.min_height * 1e3) + " mm): lower ones cannot be told from the noise (a nearer working "
+                           "distance, a longer baseline or a finer camera lowers it)");
   findPlaques(s, hs, band, reach, res.detection_threshold, best.smoothing, res);
   checkReferenceFollows(s, hs, band, res);
   if (res.plaques.empty())

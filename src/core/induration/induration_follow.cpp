@@ -85,12 +85,13 @@ void checkReferenceFollows(const Surface& s, const cv::Mat& hs, const cv::Mat& b
     const int n = cv::connectedComponentsWithStats(s.known_mask, lab, stats, cents, 8, CV_32S);
     for (int k = 1; k < n; ++k)
       if (stats.at<int>(k, cv::CC_STAT_AREA) >= 0.1 * s.known_points) bodies.setTo(255, lab == k);
+    bodies |= holesOf(bodies);  // the matcher's gaps inside a body are not its edge
     const int r = 2 * o.interior_margin_px;
     if (r > 0) cv::erode(bodies, bodies, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
   }
   res.unfollowed = largeRegions(off & bodies, s.cloud.ray, res.reference, 4 * o.min_area);
   const int n_off = cv::countNonZero(res.unfollowed);
-  res.unfollowed_share = n_off / static_cast<double>(cv::countNonZero(band & bodies));
+  res.unfollowed_share = n_off / static_cast<double>(std::max(1, cv::countNonZero(band & bodies)));
   res.reference_follows = res.unfollowed_share <= kMaxUnfollowedShare;
   if (res.reference_follows) {
     if (n_off == 0) res.unfollowed.release();

@@ -97,6 +97,14 @@ class PlaqueSearch {
     PlaqueSums sums = accumulate(box, mask, foot.pixels, A, local);
     if (sums.area < o_.min_area || sums.hk.size() < 10) return;
     if (atEdgeOrTooHigh(box, mask, sums)) return;
+    // Drawn on the smoothed heights, a region must also stand above the noise in its own measured heights: an
+    // interior whose mean is below the detection threshold is the smoothed noise's upper tail (or heights filled
+    // across a gap), not a plaque the instrument can tell from the skin.
+    if (sums.sh / sums.hk.size() < threshold_) {
+      low_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", mean " +
+                                     num(std::round(sums.sh / sums.hk.size() * 1e5) / 100) + " mm");
+      return;
+    }
     if (sums.nc < o_.min_measured_share * sums.px) {
       sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
                                         num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
@@ -361,6 +369,11 @@ class PlaqueSearch {
                                   : std::to_string(at_edge_.size()) + " raised regions were ignored: they lie at the edge of the "
                                     "measured surface (their height above the reference means nothing); the largest: " + list);
     }
+    if (!low_.empty())
+      res_.warnings.push_back(std::to_string(low_.size()) + " raised region" + (low_.size() == 1 ? " was" : "s were") +
+                              " ignored: drawn on the smoothed heights, the measured heights inside stand less than the "
+                              "detection threshold (" + num(std::round(threshold_ * 1e5) / 100) + " mm) above the "
+                              "reference on average (the noise, not a plaque); the largest: " + largest(low_));
     if (!sparse_.empty()) {
       const std::string list = largest(sparse_);
       res_.warnings.push_back(std::to_string(sparse_.size()) + " raised region" + (sparse_.size() == 1 ? " was" : "s were") +
@@ -380,6 +393,7 @@ class PlaqueSearch {
   std::vector<Plaque> plaques_;
   std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
   std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
+  std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
 };
 
 }  // namespace

@@ -26,7 +26,7 @@ def frames_in_bag(path, topic):
     with rosbag.Bag(path) as bag:
         info = bag.get_type_and_topic_info().topics
     names = list(info.keys())
-    wanted = [topic] if topic else ["stereo/left/image_raw", "stereo/landmarks"]
+    wanted = [topic] if topic else ["stereo/left/image_raw", "stereo/left/image_raw/compressed", "stereo/landmarks"]
     for w in wanted:
         for n in names:
             if n.lstrip("/") == w or n.endswith("/" + w):

@@ -97,8 +97,30 @@ def main(argv=None):
     print("on a true plaque but > 3 mm from its centroid (part of it measured): %d%s" % (
         len(partial), "".join(describe(q) + ", on the %.3f mm plaque" % host(q) for q in partial)))
     print("extra plaques (on no true plaque): %d%s" % (len(extra), "".join(describe(q) for q in extra)))
-    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d, extra %d"
-          % (required, found, worst, pasi_ok, len(extra)))
+    # healthy relief (ridges): a reference fitted to the limb cannot follow it; the measurement must say so
+    # (follows_skin false, the region in reference_unfollowed.png), and report no plaque on it
+    ridges = truth.get("ridges") or []
+    on_ridge = 0
+    for r in ridges:
+        pts = [np.array(r[k]) for k in ("start_left_m", "centre_left_m", "end_left_m")]
+        def dist(q):
+            x = np.array(q["centroid_m"])
+            best = np.inf
+            for a, b in zip(pts[:-1], pts[1:]):
+                t = np.clip((x - a) @ (b - a) / max((b - a) @ (b - a), 1e-18), 0, 1)
+                best = min(best, np.linalg.norm(x - (a + t * (b - a))))
+            return best
+        near = [q for q in extra if dist(q) <= 3e-3 * r["width_mm"] + 2e-3]
+        on_ridge += len(near)
+        print("ridge %.2f mm high, %.1f mm wide (sigma), %.0f mm long at %.0f deg around the limb: %d extra plaque(s) on it"
+              % (r["height_mm"], r["width_mm"], r["length_mm"], r["angle_around_limb_deg"], len(near)))
+    if ridges or not ref.get("follows_skin", True):
+        unf = cv2.imread(out + "/reference_unfollowed.png", cv2.IMREAD_GRAYSCALE)
+        print("reference follows the skin: %s (unfollowed share of the working band %.1f %%; %s)" % (
+            "yes" if ref.get("follows_skin", True) else "no", 100 * ref.get("unfollowed_share", 0.0),
+            "reference_unfollowed.png: %d px" % (unf > 0).sum() if unf is not None else "no reference_unfollowed.png"))
+    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d, extra %d%s"
+          % (required, found, worst, pasi_ok, len(extra), " (%d on a ridge)" % on_ridge if ridges else ""))
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@
 
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
+#include <opencv2/imgcodecs.hpp>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include <cmath>
@@ -113,6 +114,46 @@ cv::Mat toMono8(const sensor_msgs::Image& img) {
     return m8;
   }
   return cv_bridge::toCvCopy(img, enc::MONO8)->image;
+}
+
+sensor_msgs::ImagePtr fromCompressed(const sensor_msgs::CompressedImage& m) {
+  namespace enc = sensor_msgs::image_encodings;
+  const std::string what = "compressed image (format '" + m.format + "', " + std::to_string(m.data.size()) + " bytes)";
+  if (m.data.empty()) throw std::invalid_argument("empty " + what);
+  cv::Mat im;
+  try {
+    im = cv::imdecode(cv::Mat(1, static_cast<int>(m.data.size()), CV_8U, const_cast<uint8_t*>(m.data.data())),
+                      cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw std::invalid_argument("cannot decode the " + what + ": " + e.what());
+  }
+  if (im.empty()) throw std::invalid_argument("cannot decode the " + what + ": not a JPEG or PNG image OpenCV reads");
+  std::string encoding;
+  switch (im.type()) {
+    case CV_8UC1: encoding = enc::MONO8; break;
+    case CV_8UC3: encoding = enc::BGR8; break;
+    case CV_8UC4: encoding = enc::BGRA8; break;
+    case CV_16UC1: encoding = enc::MONO16; break;
+    default: throw std::invalid_argument("the " + what + " decodes to an OpenCV type " + std::to_string(im.type()) +
+                                         " skin3d does not read (8-bit grey or colour, 16-bit grey)");
+  }
+  cv_bridge::CvImage out(m.header, encoding, im);
+  return out.toImageMsg();
+}
+
+sensor_msgs::CompressedImage toCompressed(const sensor_msgs::Image& img, int jpeg_quality) {
+  if (jpeg_quality < 0 || jpeg_quality > 100) throw std::invalid_argument("toCompressed: JPEG quality must be 0 (PNG) ... 100");
+  const cv::Mat im = cv_bridge::toCvCopy(img)->image;
+  sensor_msgs::CompressedImage m;
+  m.header = img.header;
+  m.format = jpeg_quality > 0 ? img.encoding + "; jpeg compressed " + (im.channels() == 1 ? "mono8" : "bgr8")
+                              : img.encoding + "; png compressed " + img.encoding;
+  std::vector<uint8_t> buf;
+  if (!cv::imencode(jpeg_quality > 0 ? ".jpg" : ".png", im, buf,
+                    jpeg_quality > 0 ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, jpeg_quality} : std::vector<int>{}))
+    throw std::runtime_error("toCompressed: OpenCV could not encode the image");
+  m.data = std::move(buf);
+  return m;
 }
 
 sensor_msgs::Image toMono8Msg(const cv::Mat& img, const std::string& frame, const ros::Time& t) {

@@ -147,7 +147,8 @@ void FrontEndRunner::connectionChanged() {
     sync_->subscribe(*nh_, "image_raw", queue_size_, approximate_,
                      [this](const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
                             const sensor_msgs::Image::ConstPtr& ri,
-                            const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); });
+                            const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); },
+                     transport_);
   } else if (!wanted && sync_) {
     sync_.reset();
   }
@@ -174,6 +175,7 @@ void FrontEndRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std
   nh_ = std::make_unique<ros::NodeHandle>(nh);
   queue_size_ = queue_size;
   approximate_ = approximate_sync;
+  transport_ = ros_conv::imageTransportParam(pnh);
   const ros::SubscriberStatusCallback changed = [this](const ros::SingleSubscriberPublisher&) { connectionChanged(); };
   {
     std::lock_guard<std::mutex> l(connect_mutex_);  // no connectionChanged() before every publisher exists
@@ -217,6 +219,11 @@ std::unique_ptr<FrontEndRunner> startFrontEndRunner(ros::NodeHandle& nh, ros::No
   pnh.param("queue_size", queue, queue);
   pnh.param("approximate_sync", approximate, approximate);
   if (queue < 1) errors.push_back("~queue_size = " + std::to_string(queue) + " must be >= 1");
+  try {
+    ros_conv::imageTransportParam(pnh);
+  } catch (const std::exception& e) {
+    errors.push_back(e.what());
+  }
   try {
     opt.validate();
   } catch (const std::exception& e) {

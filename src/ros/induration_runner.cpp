@@ -118,7 +118,7 @@ bool IndurationRunner::saveLocked(const std::string& dir, std::string* message,
     if (upstream) all.absorb(*upstream);
     all.absorb(ledger_);
     induration::writeMeasurementResults(dir, frames_, *last_, measurer_.options(), frame_id_,
-                                        source.empty() ? "stereo/{left,right}/image_raw" : source,
+                                        source.empty() ? live_source_ : source,
                                         command_line.empty() ? std::vector<std::string>{node_name_} : command_line,
                                         all.dropped(), all.summary());
     if (dir == results_) unsaved_ = false;
@@ -188,7 +188,9 @@ void IndurationRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const s
   sync_->subscribe(nh, "image_raw", queue_size, approximate_sync,
                    [this](const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
                           const sensor_msgs::Image::ConstPtr& ri,
-                          const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); });
+                          const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); },
+                   ros_conv::imageTransportParam(pnh));
+  if (ros_conv::imageTransportParam(pnh) == "compressed") live_source_ = "stereo/{left,right}/image_raw/compressed";
   const auto& o = measurer_.options().induration;
   const auto& po = measurer_.options();
   log_.info("reference '" + o.reference_model + "', plaques above " + std::to_string(o.min_height * 1e3) + " mm; depth " +
@@ -223,6 +225,11 @@ std::unique_ptr<IndurationRunner> startIndurationRunner(ros::NodeHandle& nh, ros
   pnh.param<std::string>("maps", maps, maps);
   if (maps != "last" && maps != "all") errors.push_back("~maps = '" + maps + "' must be last or all");
   if (maps == "all" && results.empty()) errors.push_back("~maps = all needs ~results (the directory they go to)");
+  try {
+    ros_conv::imageTransportParam(pnh);
+  } catch (const std::exception& e) {
+    errors.push_back(e.what());
+  }
   if (queue < 1) errors.push_back("~queue_size = " + std::to_string(queue) + " must be >= 1");
   try {
     opt.validate();

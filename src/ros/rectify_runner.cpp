@@ -12,6 +12,7 @@ RectifyRunner::RectifyRunner(ros::NodeHandle& nh, ros::NodeHandle& pnh, RunLog l
   pnh.param("max_stamp_diff", max_stamp_diff_, max_stamp_diff_);
   pnh.param("queue_size", queue_size_, queue_size_);
   pnh.param("approximate_sync", approximate_, approximate_);
+  transport_ = ros_conv::imageTransportParam(pnh);
   if (!(max_stamp_diff_ >= 0.0)) throw std::invalid_argument("~max_stamp_diff must be >= 0 s");
   if (queue_size_ < 1) throw std::invalid_argument("~queue_size = " + std::to_string(queue_size_) + " must be >= 1");
   const ros::SubscriberStatusCallback changed = [this](const ros::SingleSubscriberPublisher&) { connectionChanged(); };
@@ -36,7 +37,8 @@ void RectifyRunner::connectionChanged() {
     sync_->subscribe(nh_, "image_raw", queue_size_, approximate_,
                      [this](const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
                             const sensor_msgs::Image::ConstPtr& ri,
-                            const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); });
+                            const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); },
+                     transport_);
   } else if (!wanted && sync_) {
     sync_.reset();
   }

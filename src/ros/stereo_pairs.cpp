@@ -48,14 +48,24 @@ bool StereoPairs::add(const std::string& topic, const rosbag::MessageInstance& m
     addCameraInfo(left_info, *m);
     return true;
   }
-  const bool left_image = topic == topic_l_, right_image = topic == topic_r_;
+  const bool left_image = topic == topic_l_ || topic == topic_l_ + "/compressed";
+  const bool right_image = topic == topic_r_ || topic == topic_r_ + "/compressed";
   if (left_image || right_image) {
-    const auto m = mi.instantiate<sensor_msgs::Image>();
-    if (!m) {
-      drop(topic, mi.getTime(), "not a sensor_msgs/Image", mi.getDataType());
+    if (const auto m = mi.instantiate<sensor_msgs::Image>()) {
+      addImage(left_image, m);
       return true;
     }
-    addImage(left_image, m);
+    // image_transport's compressed transport (JPEG, PNG): decoded here, then checked as a raw image
+    const auto c = mi.instantiate<sensor_msgs::CompressedImage>();
+    if (!c) {
+      drop(topic, mi.getTime(), "not a sensor_msgs/Image or CompressedImage", mi.getDataType());
+      return true;
+    }
+    try {
+      addImage(left_image, ros_conv::fromCompressed(*c));
+    } catch (const std::exception& e) {
+      drop(topic, c->header.stamp, "compressed image not decodable", e.what());
+    }
     return true;
   }
   return false;
@@ -147,6 +157,28 @@ void StereoPairs::flush() {
   }
 }
 
+std::vector<std::string> stereoTopicsWanted() {
+  return {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/image_raw/compressed",
+          "stereo/right/image_raw/compressed", "stereo/left/camera_info", "stereo/right/camera_info"};
+}
+
+std::string stereoImageTopic(const BagTopics& topics, bool left) {
+  const std::string raw = left ? "stereo/left/image_raw" : "stereo/right/image_raw";
+  if (topics.has(raw)) return raw;
+  return topics.has(raw + "/compressed") ? raw + "/compressed" : std::string();
+}
+
+std::vector<std::string> stereoTopicsRead(const BagTopics& topics, const std::vector<std::string>& others) {
+  std::vector<std::string> relative = {"stereo/left/camera_info", "stereo/right/camera_info"};
+  for (const bool left : {true, false})
+    if (!stereoImageTopic(topics, left).empty()) relative.push_back(stereoImageTopic(topics, left));
+  relative.insert(relative.end(), others.begin(), others.end());
+  std::vector<std::string> stored;
+  for (const auto& r : relative)
+    for (const auto& s : topics.stored(r)) stored.push_back(s);
+  return stored;
+}
+
 RawStereoPairs readRawStereoPairs(const std::string& bag_path, const std::string& ns, long max_pairs) {
   RawStereoPairs out;
   StereoPairs in;
@@ -154,10 +186,8 @@ RawStereoPairs readRawStereoPairs(const std::string& bag_path, const std::string
     rosbag::Bag bag;
     openForReading(&bag, bag_path);
     const BagTopics topics(bag, bag_path,
-                           {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                            "stereo/right/camera_info"},
-                           ns);
-    rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
+                           stereoTopicsWanted(), ns);
+    rosbag::View view(bag, rosbag::TopicQuery(stereoTopicsRead(topics)));
     auto full = [&] { return max_pairs > 0 && static_cast<long>(out.pairs.size()) >= max_pairs; };
     for (const rosbag::MessageInstance& m : view) {
       if (full()) break;

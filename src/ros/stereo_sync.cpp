@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // skin3d_ros: the four stereo topics synchronised (see include/skin3d/ros/stereo_sync.h).
 #include "skin3d/ros/stereo_sync.h"
+#include <stdexcept>
+#include <ros/console.h>
 
 #include <cmath>
 
@@ -33,6 +35,31 @@ PairFault checkStereoPair(const sensor_msgs::Image& li, const sensor_msgs::Camer
   return {};
 }
 
+std::string imageTransportParam(const ros::NodeHandle& pnh) {
+  std::string t = "raw";
+  pnh.param<std::string>("image_transport", t, t);
+  if (t != "raw" && t != "compressed")
+    throw std::invalid_argument("~image_transport = '" + t + "' must be raw or compressed (JPEG / PNG on image_raw/compressed)");
+  return t;
+}
+
+void DecodedImages::subscribe(ros::NodeHandle& nh, const std::string& topic, uint32_t queue_size) {
+  topic_ = topic + "/compressed";
+  sub_ = nh.subscribe(topic_, queue_size, &DecodedImages::onCompressed, this);
+}
+
+void DecodedImages::onCompressed(const sensor_msgs::CompressedImage::ConstPtr& m) {
+  sensor_msgs::ImageConstPtr img;
+  try {
+    img = fromCompressed(*m);
+  } catch (const std::exception& e) {
+    ++undecodable_;
+    ROS_ERROR_THROTTLE(5.0, "%s: %s (%d undecodable so far; skipped)", sub_.getTopic().c_str(), e.what(), undecodable_);
+    return;
+  }
+  signalMessage(img);
+}
+
 std::string StereoSync::subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& image,
                                   Callback callback) {
   bool approximate = false;
@@ -49,17 +76,27 @@ std::string StereoSync::subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pn
 }
 
 void StereoSync::subscribe(ros::NodeHandle& nh, const std::string& image, int queue, bool approximate,
-                           Callback callback) {
-  li_.subscribe(nh, "stereo/left/" + image, queue);
+                           Callback callback, const std::string& transport) {
+  const bool compressed = transport == "compressed";
+  if (!compressed && transport != "raw")
+    throw std::invalid_argument("image transport '" + transport + "' must be raw or compressed");
+  if (compressed) {
+    lz_.subscribe(nh, "stereo/left/" + image, queue);
+    rz_.subscribe(nh, "stereo/right/" + image, queue);
+  } else {
+    li_.subscribe(nh, "stereo/left/" + image, queue);
+    ri_.subscribe(nh, "stereo/right/" + image, queue);
+  }
   lc_.subscribe(nh, "stereo/left/camera_info", queue);
-  ri_.subscribe(nh, "stereo/right/" + image, queue);
   rc_.subscribe(nh, "stereo/right/camera_info", queue);
   callback_ = std::move(callback);
   if (approximate) {
-    approx_ = std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), li_, lc_, ri_, rc_);
+    approx_ = compressed ? std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), lz_, lc_, rz_, rc_)
+                         : std::make_unique<message_filters::Synchronizer<Approx>>(Approx(queue), li_, lc_, ri_, rc_);
     approx_->registerCallback(&StereoSync::onPair, this);
   } else {
-    exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), li_, lc_, ri_, rc_);
+    exact_ = compressed ? std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), lz_, lc_, rz_, rc_)
+                        : std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue), li_, lc_, ri_, rc_);
     exact_->registerCallback(&StereoSync::onPair, this);
   }
 }

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: BSD-3-Clause
 /**
- * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--quiet]
+ * make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--compress C] [--quiet]
  *
  * Generates a simulated dataset (DESIGN.md "Datasets") as a rosbag, deterministically from the seed,
  * without a ROS master, plus FILE.truth.yaml beside it (and FILE.map.csv, the landmarks with their descriptors, for
@@ -45,7 +45,7 @@ using namespace skin3d;
 using namespace make_dataset_detail;  // NOLINT(build/namespaces): the tool's own helpers
 
 const char* kUsage =
-    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--quiet]\n"
+    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--compress jpeg[:Q]|png] [--quiet]\n"
     "  KIND            globe-landmarks | globe-images | workpiece | skin\n"
     "  --out FILE.bag  the bag to write; the ground truth goes to FILE.truth.yaml beside it\n"
     "  --seed N        random seed (default 1, or the config's seed); same seed + config = same data\n"
@@ -53,6 +53,8 @@ const char* kUsage =
     "  --ideal         no realism (blur, vignetting, photometry, noise) and an exact calibration\n"
     "  --frames N      only the first N frames (quick tests)\n"
     "  --start SECONDS stamp of the first frame (default 1000; e.g. 1700000000 for epoch stamps as a recording has)\n"
+    "  --compress C    images as image_transport's compressed topics (stereo/{left,right}/image_raw/compressed,\n"
+    "                  sensor_msgs/CompressedImage): jpeg (quality 90), jpeg:Q (Q 1 ... 100) or png (lossless)\n"
     "  --quiet         no progress output (progress goes to stderr)\n";
 
 struct Options {
@@ -114,6 +116,24 @@ bool parseArgs(int argc, char** argv, Options* o) {
         return false;
       }
       g_start = ros::Time(t);
+    } else if (a == "--compress" && has_value) {
+      const std::string v = argv[++i];
+      char* end = nullptr;
+      if (v == "png") {
+        g_compress = 0;
+      } else if (v == "jpeg") {
+        g_compress = 90;
+      } else if (v.rfind("jpeg:", 0) == 0) {
+        const long q = std::strtol(v.c_str() + 5, &end, 10);
+        if (v.size() == 5 || *end != '\0' || q < 1 || q > 100) {
+          std::cerr << "make_dataset: --compress jpeg:Q takes a quality Q of 1 ... 100, got '" << v << "'\n";
+          return false;
+        }
+        g_compress = static_cast<int>(q);
+      } else {
+        std::cerr << "make_dataset: --compress takes jpeg, jpeg:Q (1 ... 100) or png, got '" << v << "'\n";
+        return false;
+      }
     } else if (a == "--ideal") {
       o->ideal = true;
     } else if (a == "--quiet") {

@@ -8,6 +8,7 @@
 
 #include <geometry_msgs/PoseStamped.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/Image.h>
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Geometry>
@@ -21,7 +22,11 @@ namespace make_dataset_detail {
 inline const std::string kLeftFrame = "stereo_left_optical_frame";
 inline const std::string kRightFrame = "stereo_right_optical_frame";
 inline const std::string kWorldFrame = "world";
-inline ros::Time g_start(1000.0);  // the first stamp (--start): a fixed, valid ROS time, so that bags are deterministic
+inline ros::Time g_start(1000.0);
+/** --compress: -1 raw images (image_raw), 0 PNG, 1 ... 100 JPEG of that quality (image_raw/compressed). */
+inline int g_compress = -1;
+/** One camera's image into `bag` on stereo/SIDE/image_raw, or image_raw/compressed as --compress says. */
+void writeImage(rosbag::Bag& bag, const std::string& side, const ros::Time& stamp, const sensor_msgs::Image& img);  // the first stamp (--start): a fixed, valid ROS time, so that bags are deterministic
 
 // ---- make_dataset_emit.cpp
 geometry_msgs::PoseStamped poseMsg(const Eigen::Isometry3d& T, const ros::Time& t);

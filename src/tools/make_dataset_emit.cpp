@@ -124,4 +124,12 @@ Eigen::Isometry3d poseLeftRight(const geometry::StereoRig& rig) {
   return Eigen::Isometry3d(Eigen::Translation3d(rig.rightCentre()) * Eigen::Quaterniond(rig.R_rl().transpose()));
 }
 
+void writeImage(rosbag::Bag& bag, const std::string& side, const ros::Time& stamp, const sensor_msgs::Image& img) {
+  const std::string topic = "stereo/" + side + "/image_raw";
+  if (g_compress < 0)
+    bag.write(topic, stamp, img);
+  else
+    bag.write(topic + "/compressed", stamp, skin3d::ros_conv::toCompressed(img, g_compress));
+}
+
 }  // namespace make_dataset_detail

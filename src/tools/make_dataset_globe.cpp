@@ -96,8 +96,8 @@ int makeGlobe(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::E
       const cv::Mat left = sim::renderIrradiance(*scene, true_rig.left(), T_W_L, ro);
       const cv::Mat right = sim::renderIrradiance(*scene, true_rig.right(), T_W_L * T_L_R, ro);
       const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
-      bag.write("stereo/left/image_raw", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
-      bag.write("stereo/right/image_raw", stamp,
+      writeImage(bag, "left", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+      writeImage(bag, "right", stamp,
                 ros_conv::toMono8Msg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
     } else {
       skin3d::LandmarkArray msg;

@@ -58,8 +58,8 @@ void writeRenderedExposures(const sim::Scene& scene, const sim::DatasetConfig& c
     const std::uint64_t fseed = c.seed * 1000003ull + static_cast<std::uint64_t>(k) * 2;
     bag.write("stereo/left/camera_info", stamp, ros_conv::toMsg(info.left, kLeftFrame, stamp));
     bag.write("stereo/right/camera_info", stamp, ros_conv::toMsg(info.right, kRightFrame, stamp));
-    bag.write("stereo/left/image_raw", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
-    bag.write("stereo/right/image_raw", stamp,
+    writeImage(bag, "left", stamp, ros_conv::toMono8Msg(sim::applyRealism(left, c.images.left, fseed), kLeftFrame, stamp));
+    writeImage(bag, "right", stamp,
               ros_conv::toMono8Msg(sim::applyRealism(right, c.images.right, fseed + 1), kRightFrame, stamp));
     bag.write("ground_truth/pose", stamp, poseMsg(T_W_L, stamp));
     progress.tick(k + 1);
@@ -243,6 +243,28 @@ void emitSkinTruth(YAML::Emitter& truth, const sim::SkinScene& scene, const Eige
     emitVec(truth, p.radii * 1e3);
     truth << YAML::Key << "ramp_mm" << YAML::Value << p.ramp * 1e3 << YAML::Key << "dome" << YAML::Value << p.dome;
     truth << YAML::Key << "irregularity" << YAML::Value << p.irregularity << YAML::EndMap;
+    truth << YAML::EndMap;
+  }
+  truth << YAML::EndSeq;
+  // healthy relief: not plaques; a reference fitted to the limb cannot follow it (the measurement must say so)
+  truth << YAML::Key << "ridges" << YAML::Value << YAML::BeginSeq;
+  for (const sim::SkinRidge& r : g.ridges) {
+    const double rm = g.meanRadius();
+    const Eigen::Vector3d on = scene.surfacePoint(r.centre.x(), r.centre.y() / rm);
+    truth << YAML::BeginMap;
+    truth << YAML::Key << "height_mm" << YAML::Value << r.height * 1e3;
+    truth << YAML::Key << "width_mm" << YAML::Value << r.width * 1e3;
+    truth << YAML::Key << "length_mm" << YAML::Value << r.length * 1e3;
+    truth << YAML::Key << "centre_left_m" << YAML::Value;
+    emitVec(truth, T_L_W * on);
+    // the ends of its line (on the raised surface), for finding it in an image
+    const Eigen::Vector2d dir(std::cos(r.orientation), std::sin(r.orientation));
+    for (const int e : {-1, 1}) {
+      const Eigen::Vector2d st = r.centre + e * 0.5 * r.length * dir;
+      truth << YAML::Key << (e < 0 ? "start_left_m" : "end_left_m") << YAML::Value;
+      emitVec(truth, T_L_W * scene.surfacePoint(st.x(), st.y() / rm));
+    }
+    truth << YAML::Key << "angle_around_limb_deg" << YAML::Value << r.centre.y() / rm * 180.0 / M_PI;
     truth << YAML::EndMap;
   }
   truth << YAML::EndSeq;

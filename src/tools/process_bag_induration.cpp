@@ -68,18 +68,17 @@ int runInduration(const IndurationRun& a) {
 
   rosbag::Bag bag;
   ros_io::openForReading(&bag, a.bag);
-  const ros_io::BagTopics topics(bag, a.bag,
-                                 {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                                  "stereo/right/camera_info"},
-                                 a.ns);
+  const ros_io::BagTopics topics(bag, a.bag, ros_io::stereoTopicsWanted(), a.ns);
   for (const char* t : {"stereo/left/image_raw", "stereo/right/image_raw", "stereo/left/camera_info",
-                        "stereo/right/camera_info"})
-    if (!topics.has(t))
-      throw std::invalid_argument("'" + a.bag + "' has no " + t + " (" + topics.summary() + "). Its topics:\n" +
-                                  ros_io::describeTopics(topics.all()));
+                        "stereo/right/camera_info"}) {
+    const bool image = std::string(t).find("image_raw") != std::string::npos;
+    if (image ? ros_io::stereoImageTopic(topics, std::string(t).find("left") != std::string::npos).empty() : !topics.has(t))
+      throw std::invalid_argument("'" + a.bag + "' has no " + t + (image ? " (nor " + std::string(t) + "/compressed)" : "") +
+                                  " (" + topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
+  }
   if (!a.quiet) std::fprintf(stderr, "process_bag: %s\n", topics.summary().c_str());
-  rosbag::View view(bag, rosbag::TopicQuery(topics.stored()));
-  int expected = static_cast<int>(topics.count("stereo/left/image_raw"));
+  rosbag::View view(bag, rosbag::TopicQuery(ros_io::stereoTopicsRead(topics)));
+  int expected = static_cast<int>(topics.count(ros_io::stereoImageTopic(topics, true)));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   ros_run::RunLog pairs_log = ros_run::RunLog::stderrLog("process_bag", a.quiet);
   ros_run::InputLedger pairs_ledger(&pairs_log);  // images that cannot be paired, bad stamps, encodings, sizes

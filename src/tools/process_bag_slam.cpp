@@ -35,7 +35,7 @@ namespace {
 
 /** Whether the run takes the bag's stereo images through the front end (else its stereo/landmarks). */
 bool useImages(const SlamRun& a, const ros_io::BagTopics& topics) {
-  const bool have_images = topics.has("stereo/left/image_raw") && topics.has("stereo/right/image_raw");
+  const bool have_images = !ros_io::stereoImageTopic(topics, true).empty() && !ros_io::stereoImageTopic(topics, false).empty();
   const bool have_landmarks = topics.has("stereo/landmarks");
   bool use_images = have_images;
   if (a.input == "landmarks") use_images = false;
@@ -119,6 +119,7 @@ int runSlam(const SlamRun& a) {
   ros_io::openForReading(&bag, a.bag);
   const ros_io::BagTopics topics(bag, a.bag,
                                  {"stereo/landmarks", "stereo/left/image_raw", "stereo/right/image_raw",
+                                  "stereo/left/image_raw/compressed", "stereo/right/image_raw/compressed",
                                   "stereo/left/camera_info", "stereo/right/camera_info", "imu/data",
                                   "ground_truth/pose"},
                                  a.ns);
@@ -136,16 +137,14 @@ int runSlam(const SlamRun& a) {
   if (opt.use_gyro && !topics.has("imu/data"))
     std::fprintf(stderr, "process_bag: warning: use_gyro is set but the bag has no imu/data\n");
 
-  std::vector<std::string> read = topics.stored();
-  read.erase(std::remove_if(read.begin(), read.end(),
-                            [&](const std::string& t) {
-                              const std::string r = topics.relative(t);
-                              return use_images ? r == "stereo/landmarks"
-                                                : r.rfind("stereo/", 0) == 0 && r != "stereo/landmarks";
-                            }),
-             read.end());
+  // the images (each camera's raw topic, else its compressed one) or the landmarks, and the rest
+  std::vector<std::string> read =
+      use_images ? ros_io::stereoTopicsRead(topics, {"imu/data", "ground_truth/pose"}) : std::vector<std::string>();
+  if (!use_images)
+    for (const char* r : {"stereo/landmarks", "imu/data", "ground_truth/pose"})
+      for (const auto& s : topics.stored(r)) read.push_back(s);
   rosbag::View view(bag, rosbag::TopicQuery(read));
-  int expected = static_cast<int>(use_images ? topics.count("stereo/left/image_raw") : topics.count("stereo/landmarks"));
+  int expected = static_cast<int>(use_images ? topics.count(ros_io::stereoImageTopic(topics, true)) : topics.count("stereo/landmarks"));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
   common::Progress progress(expected, a.quiet);
   int fed = 0;  // frames handed to the SLAM

@@ -118,3 +118,42 @@ TEST(SimSkin, BadGeometryIsNamed) {
     EXPECT_NE(std::string(e.what()).find("plaques[0].ramp"), std::string::npos) << e.what();
   }
 }
+
+TEST(SimSkin, ARidgeIsHealthyReliefUnderThePlaquesOnIt) {
+  // a ridge along the axis over the top of the limb (a nose's bridge), 2 mm high, sigma 3 mm, 60 mm long, with the
+  // first plaque (at s = 10 mm on the top) on its crest
+  SkinGeometry g = circularLimb();
+  skin3d::sim::SkinRidge r;
+  r.centre = Eigen::Vector2d(0.0, 0.0);
+  r.length = 0.06;
+  r.width = 0.003;
+  r.height = 2e-3;
+  g.ridges.push_back(r);
+  const SkinScene scene(g, 7);
+  // the relief: the full height on its line, exp(-1/2) one width across, rounded ends beyond +-30 mm
+  EXPECT_NEAR(scene.reliefAt(-0.02, 0.0), 2e-3, 1e-12);
+  EXPECT_NEAR(scene.reliefAt(-0.02, 0.003 / 0.04), 2e-3 * std::exp(-0.5), 1e-12);
+  EXPECT_NEAR(scene.reliefAt(0.033, 0.0), 2e-3 * std::exp(-0.5), 1e-12);
+  // a ray straight down onto the ridge away from the plaques meets R + 2 mm; onto the plaque on it R + 2.6 mm
+  Hit hit;
+  ASSERT_TRUE(scene.intersect(Eigen::Vector3d(-0.02, 0.0, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+  EXPECT_NEAR(hit.point.z(), 0.04 + 2e-3, 1e-8);
+  ASSERT_TRUE(scene.intersect(Eigen::Vector3d(0.01, 0.0, 0.3), Eigen::Vector3d(0, 0, -1), &hit));
+  EXPECT_NEAR(hit.point.z(), 0.04 + 2.6e-3, 1e-8);
+  // the plaque's truth is its height above the skin around it (the ridge's relief taken off), not above the limb
+  const auto t = scene.plaqueTruth(0, 20e-6);
+  const auto bare = SkinScene(circularLimb(), 7).plaqueTruth(0, 20e-6);
+  EXPECT_NEAR(t.top_height, 0.6e-3, 1e-6);
+  EXPECT_NEAR(t.mean_height, bare.mean_height, 2e-6);
+  EXPECT_NEAR(t.footprint_area, bare.footprint_area, 1e-9);
+  // the side plaque, far from the ridge (45 deg around: 31 mm = 10 widths), keeps its truth exactly
+  EXPECT_NEAR(scene.plaqueTruth(1, 20e-6).top_height, SkinScene(circularLimb(), 7).plaqueTruth(1, 20e-6).top_height, 1e-12);
+  // a bad ridge is named
+  g.ridges[0].height = 0;
+  try {
+    SkinScene s(g, 1);
+    FAIL() << "a ridge of no height was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("ridges[0].height"), std::string::npos) << e.what();
+  }
+}

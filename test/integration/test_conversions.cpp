@@ -7,6 +7,7 @@
 #include <functional>
 #include <limits>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -65,6 +66,53 @@ TEST(Conversions, Mono8ImageRoundTripKeepsEveryPixel) {
   EXPECT_TRUE(ros_conv::checkImage(m, nullptr, "img").empty()) << ros_conv::checkImage(m, nullptr, "img");
   const cv::Mat back = ros_conv::toMono8(m);
   EXPECT_EQ(cv::countNonZero(back != roi), 0);
+}
+
+TEST(Conversions, CompressedImagesDecodeAndUndecodableOnesAreNamed) {
+  cv::Mat tex(48, 64, CV_8UC1);
+  cv::randu(tex, 0, 255);
+  cv::GaussianBlur(tex, tex, cv::Size(), 1.5);  // camera-like texture (JPEG is made for that, not white noise)
+  const sensor_msgs::Image raw = ros_conv::toMono8Msg(tex, "left_optical", ros::Time(7, 0));
+  // PNG: lossless, mono8 back, the header kept
+  const sensor_msgs::CompressedImage png = ros_conv::toCompressed(raw, 0);
+  EXPECT_NE(png.format.find("png"), std::string::npos) << png.format;
+  const sensor_msgs::ImagePtr back = ros_conv::fromCompressed(png);
+  EXPECT_EQ(back->encoding, "mono8");
+  EXPECT_EQ(back->header.stamp, ros::Time(7, 0));
+  EXPECT_EQ(back->header.frame_id, "left_optical");
+  EXPECT_EQ(cv::countNonZero(ros_conv::toMono8(*back) != tex), 0);
+  // JPEG: the same size, close (quality 95 on a smooth texture: under 2 grey levels on average)
+  const sensor_msgs::CompressedImage jpg = ros_conv::toCompressed(raw, 95);
+  EXPECT_LT(jpg.data.size(), png.data.size());
+  const cv::Mat j = ros_conv::toMono8(*ros_conv::fromCompressed(jpg));
+  ASSERT_EQ(j.size(), tex.size());
+  cv::Mat diff;
+  cv::absdiff(j, tex, diff);
+  EXPECT_LT(cv::mean(diff)[0], 2.0);
+  // a colour JPEG decodes to bgr8, which toMono8 converts
+  cv::Mat colour;
+  cv::cvtColor(tex, colour, cv::COLOR_GRAY2BGR);
+  sensor_msgs::Image craw = raw;
+  craw.encoding = "bgr8";
+  craw.step = 3 * 64;
+  craw.data.assign(colour.data, colour.data + colour.total() * 3);
+  const sensor_msgs::ImagePtr cback = ros_conv::fromCompressed(ros_conv::toCompressed(craw, 95));
+  EXPECT_EQ(cback->encoding, "bgr8");
+  EXPECT_EQ(ros_conv::toMono8(*cback).size(), tex.size());
+  // undecodable data and empty messages are named
+  sensor_msgs::CompressedImage bad = jpg;
+  bad.data.resize(20);
+  std::fill(bad.data.begin(), bad.data.end(), 7);
+  try {
+    ros_conv::fromCompressed(bad);
+    ADD_FAILURE() << "garbage decoded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot decode"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("20 bytes"), std::string::npos) << e.what();
+  }
+  bad.data.clear();
+  EXPECT_THROW(ros_conv::fromCompressed(bad), std::invalid_argument);
+  EXPECT_THROW(ros_conv::toCompressed(raw, 101), std::invalid_argument);
 }
 
 TEST(Conversions, Mono8MessageRefusesOtherImageTypes) {

@@ -9,6 +9,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -121,6 +122,74 @@ TEST(IndurationAccuracy, FullResolutionWorkpieceWithRealism) {
   // the report files of docs/design.md
   for (const char* f : {"induration.yaml", "height_map.png", "surface.ply"})
     EXPECT_EQ(run(std::string("test -s ") + out + "/" + f), 0) << f;
+}
+
+/** Each true plateau's measured top height (mm) in frame 0 of `out`, matched by centroid within 3 mm (NaN: not found);
+ *  `extra`: plaques on no plateau. */
+std::vector<double> plateauTops(const YAML::Node& truth, const std::string& out, int* extra) {
+  const YAML::Node plaques = YAML::LoadFile(out + "/induration.yaml")["frames"][0]["plaques"];
+  std::vector<bool> used(plaques.size(), false);
+  std::vector<double> tops;
+  for (const auto& t : truth["plateaus"]) {
+    const auto c = t["centroid_left_m"];
+    const Eigen::Vector3d ct(c[0].as<double>(), c[1].as<double>(), c[2].as<double>());
+    int best = -1;
+    double best_d = 3e-3;
+    for (std::size_t j = 0; j < plaques.size(); ++j) {
+      const auto q = plaques[j]["centroid_m"];
+      const double d = (Eigen::Vector3d(q[0].as<double>(), q[1].as<double>(), q[2].as<double>()) - ct).norm();
+      if (d < best_d) {
+        best_d = d;
+        best = static_cast<int>(j);
+      }
+    }
+    if (best >= 0) used[best] = true;
+    tops.push_back(best >= 0 ? plaques[best]["top_height_mm"].as<double>() : std::nan(""));
+  }
+  *extra = static_cast<int>(std::count(used.begin(), used.end(), false));
+  return tops;
+}
+
+// The same scene through image_transport's compressed transport (make_dataset --compress, process_bag reads
+// stereo/{left,right}/image_raw/compressed): PNG is lossless, so every figure must equal the raw run's; JPEG at
+// quality 90 adds its quantisation noise, so every plateau must still be found, no other plaque, each within
+// 10 um more than the raw run's worst error of the truth (a quarter-resolution, one-frame workpiece: fast).
+TEST(IndurationAccuracy, CompressedImagesAreMeasuredLikeRawOnes) {
+  const std::string dir = ::testing::TempDir() + "skin3d_induration_compressed";
+  ASSERT_EQ(run("mkdir -p " + dir), 0);
+  {
+    std::FILE* f = std::fopen((dir + "/quarter.yaml").c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs("workpiece: {resolution_scale: 0.25, frames: 1}\n", f);
+    std::fclose(f);
+  }
+  std::vector<std::vector<double>> tops;
+  YAML::Node truth;
+  for (const std::string c : {"raw", "png", "jpeg:90"}) {
+    const std::string name = c == "jpeg:90" ? "jpeg90" : c, bag = dir + "/" + name + ".bag", out = dir + "/" + name;
+    ASSERT_EQ(run(kMakeDataset + " workpiece --quiet --config " + dir + "/quarter.yaml --out " + bag +
+                  (c == "raw" ? "" : " --compress " + c)),
+              0);
+    ASSERT_EQ(run(kProcessBag + " --induration --quiet --bag " + bag + " --out " + out), 0) << c;
+    if (c == "raw") truth = YAML::LoadFile(dir + "/raw.truth.yaml");
+    int extra = 0;
+    tops.push_back(plateauTops(truth, out, &extra));
+    EXPECT_EQ(extra, 0) << c << ": plaques on no plateau";
+  }
+  ASSERT_EQ(tops[0].size(), 7u);
+  double worst_raw = 0;
+  for (std::size_t i = 0; i < tops[0].size(); ++i) {
+    const double h = truth["plateaus"][i]["height_mm"].as<double>();
+    ASSERT_FALSE(std::isnan(tops[0][i])) << "raw: the " << h << " mm plateau was not found";
+    worst_raw = std::max(worst_raw, std::fabs(tops[0][i] - h));
+  }
+  for (std::size_t i = 0; i < tops[0].size(); ++i) {
+    const double h = truth["plateaus"][i]["height_mm"].as<double>();
+    std::printf("plateau %.1f mm: raw %.4f, png %.4f, jpeg 90 %.4f mm\n", h, tops[0][i], tops[1][i], tops[2][i]);
+    EXPECT_EQ(tops[1][i], tops[0][i]) << "PNG is lossless: the " << h << " mm plateau must read as in the raw run";
+    ASSERT_FALSE(std::isnan(tops[2][i])) << "jpeg 90: the " << h << " mm plateau was not found";
+    EXPECT_LE(std::fabs(tops[2][i] - h), worst_raw + 0.010) << "jpeg 90: the " << h << " mm plateau";
+  }
 }
 
 }  // namespace

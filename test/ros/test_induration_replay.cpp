@@ -20,6 +20,7 @@
 #include <rosgraph_msgs/Log.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/image_encodings.h>
@@ -28,6 +29,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -241,10 +244,26 @@ TEST(IndurationReplay, SaveResults) {
 }
 
 // Bad input drops the frame with a warning that names the topic and the problem; the nodelet keeps running.
+/** A mono8 image as image_transport's compressed transport carries it (PNG). */
+sensor_msgs::CompressedImage compressed(const sensor_msgs::Image& img) {
+  const cv::Mat m(static_cast<int>(img.height), static_cast<int>(img.width), CV_8UC1,
+                  const_cast<uint8_t*>(img.data.data()), img.step);
+  sensor_msgs::CompressedImage c;
+  c.header = img.header;
+  c.format = "mono8; png compressed mono8";
+  cv::imencode(".png", m, c.data);
+  return c;
+}
+
 TEST(IndurationReplay, BadInputKeepsRunning) {
-  ros::NodeHandle nh;
-  ros::Publisher li = nh.advertise<sensor_msgs::Image>("stereo/left/image_raw", 2);
-  ros::Publisher ri = nh.advertise<sensor_msgs::Image>("stereo/right/image_raw", 2);
+  ros::NodeHandle nh, pnh("~");
+  std::string transport = "raw";  // the nodelet's ~image_transport: the bad input goes where it listens
+  pnh.param<std::string>("image_transport", transport, transport);
+  const bool z = transport == "compressed";
+  ros::Publisher li = z ? nh.advertise<sensor_msgs::CompressedImage>("stereo/left/image_raw/compressed", 2)
+                        : nh.advertise<sensor_msgs::Image>("stereo/left/image_raw", 2);
+  ros::Publisher ri = z ? nh.advertise<sensor_msgs::CompressedImage>("stereo/right/image_raw/compressed", 2)
+                        : nh.advertise<sensor_msgs::Image>("stereo/right/image_raw", 2);
   ros::Publisher lc = nh.advertise<sensor_msgs::CameraInfo>("stereo/left/camera_info", 2);
   ros::Publisher rc = nh.advertise<sensor_msgs::CameraInfo>("stereo/right/camera_info", 2);
   // The nodelets' throttled errors count simulated time, which stopped with the bag: move it on before each
@@ -269,8 +288,13 @@ TEST(IndurationReplay, BadInputKeepsRunning) {
     l.header.stamp = r.header.stamp = lci.header.stamp = rci.header.stamp = t;
     lc.publish(lci);
     rc.publish(rci);
-    li.publish(l);
-    ri.publish(r);
+    if (z) {
+      li.publish(compressed(l));
+      ri.publish(compressed(r));
+    } else {
+      li.publish(l);
+      ri.publish(r);
+    }
   };
   const std::string L = "stereo_left_optical_frame", R = "stereo_right_optical_frame";
   // Left and right of different sizes.
@@ -283,6 +307,14 @@ TEST(IndurationReplay, BadInputKeepsRunning) {
   publishPair(tick(), image(L, 64, 48), uncal, image(R, 64, 48), cameraInfo(R, 64, 48, 0.1));
   EXPECT_TRUE(waitFor([] { return listener.hasError("uncalibrated"); }, 20.0))
       << "no error about the uncalibrated camera_info on /rosout";
+  if (z) {  // a compressed image that does not decode
+    sensor_msgs::CompressedImage junk = compressed(image(L, 64, 48));
+    junk.header.stamp = ros::Time(tick());
+    junk.data.assign(100, 7);
+    li.publish(junk);
+    EXPECT_TRUE(waitFor([] { return listener.hasError("cannot decode"); }, 20.0))
+        << "no error about the undecodable compressed image on /rosout";
+  }
   // Still alive: the manager answers the service.
   skin3d::SaveResults srv;
   srv.request.directory = "/tmp/skin3d_induration_rostest_alive";

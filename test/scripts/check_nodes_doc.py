@@ -38,6 +38,9 @@ NODES = {
 PARAM_RE = re.compile(r'\bp?nh_?\s*(?:\.|->)\s*(?:param|getParam|hasParam|getParamCached)\s*(?:<[^>()]*>)?\s*\(\s*"([^"]+)"')
 CALL_RE = re.compile(r'\b((?:advertise|subscribe)\w*)\s*(?:<[^;{}]*?>)?\s*\(([^;]*?)\)\s*;', re.S)
 STRING_RE = re.compile(r'"([^"\\]*)"')
+# ros_conv::imageTransportParam(pnh) reads ~image_transport; a stereo subscription then also takes image_transport's
+# compressed topics (IMAGE/compressed)
+TRANSPORT_RE = re.compile(r'\bimageTransportParam\s*\(')
 SYNC_RE = re.compile(r'\b\w+\s*(?:\.|->)\s*subscribe\s*\([^;]*?"(image_raw|image_rect)"', re.S)
 
 
@@ -50,6 +53,8 @@ def code_params(texts):
     keys = set()
     for t in texts:
         keys.update(PARAM_RE.findall(strip_comments(t)))
+        if TRANSPORT_RE.search(strip_comments(t)):
+            keys.add("image_transport")
     return keys
 
 
@@ -69,6 +74,8 @@ def code_topics(texts):
             for side in ("left", "right"):
                 topics.add("stereo/%s/%s" % (side, image))
                 topics.add("stereo/%s/camera_info" % side)
+                if TRANSPORT_RE.search(t):
+                    topics.add("stereo/%s/%s/compressed" % (side, image))
     return topics, services
 
 

@@ -9,6 +9,7 @@
 #include <geometry_msgs/Pose.h>
 #include <ros/node_handle.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <skin3d/IndurationReport.h>
@@ -61,6 +62,17 @@ std::string checkImage(const sensor_msgs::Image& img, const sensor_msgs::CameraI
  *  scaled by 1/256 (either byte order), colour encodings through cv_bridge.
  *  @throws std::invalid_argument (single-channel encodings) or cv_bridge::Exception when the image is not usable. */
 cv::Mat toMono8(const sensor_msgs::Image& img);
+
+/**
+ * @brief A sensor_msgs/CompressedImage (image_transport's "compressed": JPEG or PNG) decoded into an Image with the
+ * same header: mono8, bgr8, bgra8 or mono16 as the data holds (the format string is not needed; compressed_image_
+ * transport's "rgb8; jpeg compressed bgr8" and plain "jpeg" / "png" both decode).
+ * @throws std::invalid_argument naming the format and size when the data is empty or cannot be decoded.
+ */
+sensor_msgs::ImagePtr fromCompressed(const sensor_msgs::CompressedImage& m);
+
+/** @brief The image as a CompressedImage: "jpeg" with `jpeg_quality` 1 ... 100, or "png" when it is 0. */
+sensor_msgs::CompressedImage toCompressed(const sensor_msgs::Image& img, int jpeg_quality);
 
 /** @brief An 8-bit single-channel image as a mono8 message (copied row by row) in `frame`, stamped `t`. */
 sensor_msgs::Image toMono8Msg(const cv::Mat& mono8, const std::string& frame, const ros::Time& t);

@@ -77,6 +77,7 @@ class FrontEndRunner {
   std::unique_ptr<ros::NodeHandle> nh_;  // live only (a NodeHandle needs ros::init)
   int queue_size_ = 5;
   bool approximate_ = false;
+  std::string transport_ = "raw";  // ~image_transport
   std::mutex connect_mutex_;
   std::unique_ptr<ros_conv::StereoSync> sync_;
   ros::Publisher pub_landmarks_, pub_points_, pub_matches_, pub_matches_image_, pub_rect_l_, pub_rect_r_;

@@ -68,6 +68,7 @@ class IndurationRunner {
   const induration::FrameMeasurement* last() const { return last_ ? &*last_ : nullptr; }
 
  private:
+  std::string live_source_ = "stereo/{left,right}/image_raw";  // the topics it subscribed (~image_transport)
   bool saveLocked(const std::string& dir, std::string* message, const std::vector<std::string>& command_line,
                   const std::string& source, const InputLedger* upstream);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);

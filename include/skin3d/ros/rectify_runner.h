@@ -42,6 +42,7 @@ class RectifyRunner {
   double max_stamp_diff_ = 0.005;
   int queue_size_ = 5;
   bool approximate_ = false;
+  std::string transport_ = "raw";  // ~image_transport
   std::unique_ptr<ros_conv::StereoSync> sync_;
   ros::Publisher pub_left_, pub_right_;
 };

@@ -105,6 +105,17 @@ class StereoPairs {
   std::string last_fault_;
 };
 
+class BagTopics;
+
+/** @brief The relative names a bag's stereo pairs may be stored under: stereo/{left,right}/image_raw, their
+ *  image_transport "compressed" topics (image_raw/compressed: JPEG or PNG CompressedImage) and the camera_infos. */
+std::vector<std::string> stereoTopicsWanted();
+/** @brief The image topic of one camera in a bag: image_raw when stored, else image_raw/compressed, else "". */
+std::string stereoImageTopic(const BagTopics& topics, bool left);
+/** @brief The stored names to read for the stereo pairs (each camera's image topic as stereoImageTopic chooses it,
+ *  the camera_infos) and for the `others` relative names: a bag with both transports is read raw. */
+std::vector<std::string> stereoTopicsRead(const BagTopics& topics, const std::vector<std::string>& others = {});
+
 /** The raw stereo pairs of a bag, read into memory (benchmarks time them without the bag's I/O). */
 struct RawStereoPairs {
   std::vector<std::pair<cv::Mat, cv::Mat>> pairs;  //!< left, right, mono8, in stamp order
@@ -112,7 +123,7 @@ struct RawStereoPairs {
 };
 
 /**
- * @brief The first `max_pairs` (<= 0: all) stereo/{left,right}/image_raw pairs with equal stamps of the bag
+ * @brief The first `max_pairs` (<= 0: all) stereo/{left,right}/image_raw (or image_raw/compressed) pairs with equal stamps of the bag
  * (topics under `ns` as ros_io::BagTopics chooses them) as mono8 images, and the first camera_info of each side.
  * @throws std::runtime_error naming the bag and the problem: unreadable, no pair, no camera_info, or a
  * camera_info whose size differs from the images'.

@@ -11,7 +11,10 @@
 #include <message_filters/sync_policies/exact_time.h>
 #include <message_filters/synchronizer.h>
 #include <ros/node_handle.h>
+#include <message_filters/simple_filter.h>
+#include <ros/subscriber.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 
 #include <functional>
@@ -37,6 +40,27 @@ PairFault checkStereoPair(const sensor_msgs::Image& left, const sensor_msgs::Cam
                           const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info,
                           double max_stamp_diff = 0.005);
 
+/**
+ * @brief ~image_transport of `pnh`: "raw" (default: sensor_msgs/Image on stereo/SIDE/image_raw) or "compressed"
+ * (image_transport's compressed transport: sensor_msgs/CompressedImage, JPEG or PNG, on image_raw/compressed,
+ * decoded by the node). @throws std::invalid_argument naming any other value.
+ */
+std::string imageTransportParam(const ros::NodeHandle& pnh);
+
+/** @brief A message_filters source of decoded images: subscribes TOPIC/compressed and passes each CompressedImage on
+ *  as a sensor_msgs/Image (ros_conv::fromCompressed); an undecodable one is logged (throttled) and skipped. */
+class DecodedImages : public message_filters::SimpleFilter<sensor_msgs::Image> {
+ public:
+  void subscribe(ros::NodeHandle& nh, const std::string& topic, uint32_t queue_size);
+  int undecodable() const { return undecodable_; }
+
+ private:
+  void onCompressed(const sensor_msgs::CompressedImage::ConstPtr& m);
+  ros::Subscriber sub_;
+  std::string topic_;
+  int undecodable_ = 0;
+};
+
 class StereoSync {
  public:
   using Callback = std::function<void(const sensor_msgs::Image::ConstPtr&, const sensor_msgs::CameraInfo::ConstPtr&,
@@ -48,8 +72,10 @@ class StereoSync {
    * @return empty, or the problem with a parameter to log (a ~queue_size below 1 is replaced by 5).
    */
   std::string subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& image, Callback callback);
-  /** @brief As above with the queue (>= 1) and the policy given. Destroying the StereoSync unsubscribes. */
-  void subscribe(ros::NodeHandle& nh, const std::string& image, int queue_size, bool approximate, Callback callback);
+  /** @brief As above with the queue (>= 1), the policy and the transport ("raw" or "compressed", see
+   *  imageTransportParam) given. Destroying the StereoSync unsubscribes. */
+  void subscribe(ros::NodeHandle& nh, const std::string& image, int queue_size, bool approximate, Callback callback,
+                 const std::string& transport = "raw");
 
  private:
   // message_filters binds a member function to the four messages (a std::function would be bound to nine)
@@ -60,6 +86,7 @@ class StereoSync {
   using Approx = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
                                                                  sensor_msgs::Image, sensor_msgs::CameraInfo>;
   message_filters::Subscriber<sensor_msgs::Image> li_, ri_;
+  DecodedImages lz_, rz_;  // the compressed transport's
   message_filters::Subscriber<sensor_msgs::CameraInfo> lc_, rc_;
   std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
   std::unique_ptr<message_filters::Synchronizer<Approx>> approx_;

@@ -54,11 +54,23 @@ struct SkinPlaque {
   std::uint64_t shape_seed = 1;
 };
 
+/** @brief Healthy relief on the limb, a ridge (a nose's bridge, a tendon, the raised side of a fold): a Gaussian
+ *  cross-section of `height` and standard deviation `width` along a straight line of `length` (ends rounded over
+ *  one width), in the limb's surface coordinates. Not a plaque: a reference fitted to the limb cannot follow it. */
+struct SkinRidge {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();  //!< (s along the axis, t = r_mean phi around it), m
+  double orientation = 0.0;  //!< rad: direction of the ridge's line in (s, t); 0 = along the limb's axis
+  double length = 0.04;      //!< m
+  double width = 0.004;      //!< m, Gaussian sigma across
+  double height = 2.0e-3;    //!< m, on its line
+};
+
 /** @brief The limb and its plaques. */
 struct SkinGeometry {
   double semi_axis_y = 0.04, semi_axis_z = 0.04;  //!< m, cross-section (y across, z towards the rig)
   double length = 0.4;                            //!< m, along x (centred)
   std::vector<SkinPlaque> plaques;
+  std::vector<SkinRidge> ridges;                  //!< healthy relief (plaques on a ridge sit on top of it)
   double contrast = 1.0;                          //!< scales every albedo modulation
   bool scale_texture = true;                      //!< flaky psoriatic scale on plaque tops
   double meanRadius() const { return 0.5 * (semi_axis_y + semi_axis_z); }
@@ -66,7 +78,7 @@ struct SkinGeometry {
 
 /** @brief Truth of one plaque (from the generator's geometry, integrated numerically on a fine grid). */
 struct SkinPlaqueTruth {
-  double top_height = 0;       //!< m, peak distance to the base surface along its normal
+  double top_height = 0;       //!< m, peak distance to the base surface along its normal (less the ridges' relief there)
   double mean_height = 0;      //!< m, mean distance over the footprint
   double footprint_area = 0;   //!< m^2 on the base surface where the height > 0
   double top_area = 0;         //!< m^2 where the height >= 99 % of the peak (flat top: the top face)
@@ -84,8 +96,11 @@ class SkinScene : public Scene {
   float albedo(const Hit& hit) const override;
 
   const SkinGeometry& geometry() const { return g_; }
-  /** @brief Height of the skin above the base at surface coordinates (s, phi), m (0 outside plaques). */
+  /** @brief Height of the skin above the base at surface coordinates (s, phi), m: the ridges' relief plus the
+   *  plaque there (0 on the bare limb). */
   double heightAt(double s, double phi) const;
+  /** @brief The ridges' relief alone at (s, phi), m. */
+  double reliefAt(double s, double phi) const;
   /** @brief Index of the plaque whose footprint holds (s, phi), or -1; its height there in *height if given. */
   int plaqueAt(double s, double phi, double* height = nullptr) const;
   /** @brief Surface coordinates (s, phi) of a limb-frame point (its elliptic angle). */
@@ -107,6 +122,7 @@ class SkinScene : public Scene {
   double h_max_ = 0;
   struct Box { double s0, s1, p0, p1; };
   std::vector<Box> boxes_;  // (s, phi) bounds of each plaque's footprint, with a margin
+  std::vector<Box> relief_boxes_;  // and of each ridge (out to 4 widths)
   std::vector<Eigen::Vector3d> harmonics_;  // per plaque: amplitudes of harmonics 2, 3, 4
   std::vector<Eigen::Vector3d> phases_;
 };

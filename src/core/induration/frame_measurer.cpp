@@ -139,6 +139,9 @@ void writeFrameMaps(const std::string& dir, const FrameMeasurement& m) {
   write("left_rect.png", m.left_rect);
   if (!m.left_rect.empty()) write("unknown_reason.png", stereo::unknownReasonImage(m.disparity, m.left_rect));
   write("height_map.tiff", r.height_map);
+  // where the reference does not follow the skin (255; all 0 when it does): the hatching of height_map.png
+  if (!r.height_map.empty())
+    write("reference_unfollowed.png", r.unfollowed.empty() ? cv::Mat(r.height_map.size(), CV_8U, cv::Scalar(0)) : r.unfollowed);
 }
 
 std::string frameMapsDirectory(const std::string& results, int index) {

@@ -138,6 +138,7 @@ SkinGeometry SkinConfig::geometryFor(std::uint64_t seed, double* y, double* t, d
       throw SimConfigError("skin.plaque_count", std::string("field 'skin.plaque_count': ") + e.what());
     }
     g.length = geometry.length;
+    g.ridges = geometry.ridges;  // relief is always as configured
     std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 0xC0FFEEull);
     auto u = [&](double m) { return m * (2.0 * static_cast<double>(rng() >> 11) * (1.0 / 9007199254740992.0) - 1.0); };
     *y = u(max_yaw);
@@ -268,7 +269,7 @@ void readWorkpiece(const Section& top, WorkpieceConfig& w) {
 /** The skin section (limb, plaques, pose, imaging). */
 void readSkin(const Section& top, SkinConfig& k) {
   const Section ks = top.sub("skin", false,
-                             {"random", "plaque_count", "dome_max", "limb", "plaques", "yaw_deg", "tilt_deg", "roll_deg",
+                             {"random", "plaque_count", "dome_max", "limb", "plaques", "ridges", "yaw_deg", "tilt_deg", "roll_deg",
                               "max_yaw_deg", "max_tilt_deg", "max_roll_deg", "working_distance_mm", "resolution_scale",
                               "frames", "fps", "contrast", "scale_texture"});
   k.random = ks.boolean("random", k.random);
@@ -296,6 +297,19 @@ void readSkin(const Section& top, SkinConfig& k) {
       q.irregularity = p.number("irregularity", false, q.irregularity);
       q.shape_seed = k.geometry.plaques.size() + 1;
       k.geometry.plaques.push_back(q);
+    }
+  }
+  if (ks.has("ridges")) {
+    k.geometry.ridges.clear();
+    for (const auto& p : ks.sequence("ridges", {"centre_mm", "orientation_deg", "length_mm", "width_mm", "height_mm"})) {
+      SkinRidge r;
+      const auto cc = p.list("centre_mm", 2, true);
+      r.centre = Eigen::Vector2d(cc[0], cc[1]) * 1e-3;
+      r.orientation = p.number("orientation_deg", false, 0.0) * kDeg;
+      r.length = p.number("length_mm", false, r.length * 1e3) * 1e-3;
+      r.width = p.number("width_mm", false, r.width * 1e3) * 1e-3;
+      r.height = p.number("height_mm", true) * 1e-3;
+      k.geometry.ridges.push_back(r);
     }
   }
   k.yaw = ks.number("yaw_deg", false, k.yaw / kDeg) * kDeg;

@@ -86,6 +86,40 @@ SkinScene::SkinScene(SkinGeometry g, std::uint64_t seed) : g_(std::move(g)), see
     const double reach = p.radii.maxCoeff() * (1 + p.irregularity) + 2e-3;
     boxes_.push_back({p.centre.x() - reach, p.centre.x() + reach, (p.centre.y() - reach) / rm, (p.centre.y() + reach) / rm});
   }
+  double relief = 0;
+  for (std::size_t k = 0; k < g_.ridges.size(); ++k) {
+    const SkinRidge& r = g_.ridges[k];
+    const std::string n = "ridges[" + std::to_string(k) + "]";
+    if (!r.centre.allFinite() || !std::isfinite(r.orientation)) bad(n + ".centre and orientation must be finite");
+    if (!(r.height > 0) || r.height > 0.01) bad(n + ".height must be in (0, 10] mm (got " + num(r.height * 1e3) + " mm)");
+    if (!(r.width > 0) || r.width > 0.05) bad(n + ".width must be in (0, 50] mm");
+    if (!(r.length > 0) || r.length > 1.0) bad(n + ".length must be in (0, 1000] mm");
+    const double half = 0.5 * r.length + 4 * r.width;
+    const double ds = std::fabs(std::cos(r.orientation)) * 0.5 * r.length + 4 * r.width;
+    const double dt = std::fabs(std::sin(r.orientation)) * 0.5 * r.length + 4 * r.width;
+    if (std::fabs(r.centre.y() / rm) + dt / rm > 0.49 * kPi || half <= 0)
+      bad(n + ": reaches more than 88 deg around the limb from the top");
+    relief_boxes_.push_back({r.centre.x() - ds, r.centre.x() + ds, (r.centre.y() - dt) / rm, (r.centre.y() + dt) / rm});
+    relief += r.height;
+  }
+  h_max_ += relief;  // a plaque may sit on a ridge
+}
+
+double SkinScene::reliefAt(double s, double phi) const {
+  double h = 0.0;
+  const double t = g_.meanRadius() * phi;
+  for (std::size_t k = 0; k < g_.ridges.size(); ++k) {
+    const Box& b = relief_boxes_[k];
+    if (s < b.s0 || s > b.s1 || phi < b.p0 || phi > b.p1) continue;
+    const SkinRidge& r = g_.ridges[k];
+    const double c = std::cos(r.orientation), sn = std::sin(r.orientation);
+    const double du = s - r.centre.x(), dv = t - r.centre.y();
+    const double along = c * du + sn * dv, across = -sn * du + c * dv;
+    const double beyond = std::max(0.0, std::fabs(along) - 0.5 * r.length);  // the rounded ends
+    const double d2 = across * across + beyond * beyond;
+    h += r.height * std::exp(-0.5 * d2 / (r.width * r.width));
+  }
+  return h;
 }
 
 double SkinScene::profile(std::size_t k, double s, double phi) const {
@@ -109,7 +143,7 @@ double SkinScene::profile(std::size_t k, double s, double phi) const {
 double SkinScene::heightAt(double s, double phi) const {
   double h = 0.0;
   plaqueAt(s, phi, &h);
-  return h;
+  return h + (g_.ridges.empty() ? 0.0 : reliefAt(s, phi));
 }
 
 int SkinScene::plaqueAt(double s, double phi, double* height) const {
@@ -203,12 +237,13 @@ bool SkinScene::intersect(const Eigen::Vector3d& o, const Eigen::Vector3d& d, Hi
   };
   // near a plaque? (samples every 0.5 mm of the ray between the enclosing cylinder and the base)
   bool near = false;
-  if (!boxes_.empty()) {
+  if (!boxes_.empty() || !relief_boxes_.empty()) {
     const int n = 1 + static_cast<int>(std::ceil((t_end - to0) / 0.5e-3));
     for (int i = 0; i <= n && !near; ++i) {
       const Eigen::Vector2d sc = surfaceCoordinates(o + (to0 + (t_end - to0) * i / n) * d);
-      for (const Box& bx : boxes_)
-        if (sc.x() >= bx.s0 && sc.x() <= bx.s1 && sc.y() >= bx.p0 && sc.y() <= bx.p1) near = true;
+      for (const std::vector<Box>* v : {&boxes_, &relief_boxes_})
+        for (const Box& bx : *v)
+          if (sc.x() >= bx.s0 && sc.x() <= bx.s1 && sc.y() >= bx.p0 && sc.y() <= bx.p1) near = true;
     }
   }
   if (!near) {
@@ -289,7 +324,9 @@ SkinPlaqueTruth SkinScene::plaqueTruth(std::size_t k, double step) const {
   t.top_point = surfacePoint(p.centre.x(), phic);
   t.normal = baseNormal(phic);
   std::vector<std::pair<double, double>> cells;  // (distance, dA)
-  double peak = distanceToBase(t.top_point);
+  // heights above the healthy skin around the plaque: a plaque on a ridge stands on the ridge's relief
+  const bool relief = !g_.ridges.empty();
+  double peak = distanceToBase(t.top_point) - (relief ? reliefAt(p.centre.x(), phic) : 0.0);
   Eigen::Vector3d cen = Eigen::Vector3d::Zero();
   const int n = static_cast<int>(std::ceil(reach / step));
   for (int i = -n; i <= n; ++i)
@@ -297,7 +334,7 @@ SkinPlaqueTruth SkinScene::plaqueTruth(std::size_t k, double step) const {
       const double s = p.centre.x() + i * step, phi = (p.centre.y() + j * step) / rm;
       if (profile(k, s, phi) <= 0) continue;
       const Eigen::Vector3d X = surfacePoint(s, phi);
-      const double dist = distanceToBase(X);
+      const double dist = distanceToBase(X) - (relief ? reliefAt(s, phi) : 0.0);
       const double dA = step * step / rm * std::hypot(a * std::cos(phi), b * std::sin(phi));
       cells.emplace_back(dist, dA);
       peak = std::max(peak, dist);

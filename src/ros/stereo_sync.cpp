@@ -44,8 +44,7 @@ std::string imageTransportParam(const ros::NodeHandle& pnh) {
 }
 
 void DecodedImages::subscribe(ros::NodeHandle& nh, const std::string& topic, uint32_t queue_size) {
-  topic_ = topic + "/compressed";
-  sub_ = nh.subscribe(topic_, queue_size, &DecodedImages::onCompressed, this);
+  sub_ = nh.subscribe(topic + "/compressed", queue_size, &DecodedImages::onCompressed, this);
 }
 
 void DecodedImages::onCompressed(const sensor_msgs::CompressedImage::ConstPtr& m) {
@@ -71,7 +70,13 @@ std::string StereoSync::subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pn
     problem = "~queue_size = " + std::to_string(queue) + " must be >= 1; using 5";
     queue = 5;
   }
-  subscribe(nh, image, queue, approximate, std::move(callback));
+  std::string transport = "raw";
+  try {
+    transport = imageTransportParam(pnh);
+  } catch (const std::exception& e) {
+    problem += (problem.empty() ? "" : "; ") + std::string(e.what()) + "; using raw";
+  }
+  subscribe(nh, image, queue, approximate, std::move(callback), transport);
   return problem;
 }
 

@@ -57,7 +57,6 @@ class DecodedImages : public message_filters::SimpleFilter<sensor_msgs::Image> {
  private:
   void onCompressed(const sensor_msgs::CompressedImage::ConstPtr& m);
   ros::Subscriber sub_;
-  std::string topic_;
   int undecodable_ = 0;
 };
 
@@ -67,9 +66,11 @@ class StereoSync {
                                       const sensor_msgs::Image::ConstPtr&, const sensor_msgs::CameraInfo::ConstPtr&)>;
   /**
    * @brief Subscribes stereo/left/`image`, stereo/left/camera_info, stereo/right/`image` and
-   * stereo/right/camera_info of `nh`, synchronised as the private parameters ~approximate_sync (false: equal
-   * stamps) and ~queue_size (5) of `pnh` say, and calls `callback` with each set.
-   * @return empty, or the problem with a parameter to log (a ~queue_size below 1 is replaced by 5).
+   * stereo/right/camera_info of `nh` (or the images' compressed topics), synchronised as the private parameters
+   * ~approximate_sync (false: equal stamps), ~queue_size (5) and ~image_transport (raw) of `pnh` say, and calls
+   * `callback` with each set.
+   * @return empty, or the problem with a parameter to log (a ~queue_size below 1 is replaced by 5, an unknown
+   * ~image_transport by raw).
    */
   std::string subscribe(ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& image, Callback callback);
   /** @brief As above with the queue (>= 1), the policy and the transport ("raw" or "compressed", see

@@ -184,13 +184,14 @@ void IndurationRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const s
   diagnostics_->add("induration", this, &IndurationRunner::diagnose);
   diag_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
   // The measurement is the node's output (its results directory too): it subscribes whether or not anyone listens.
+  const std::string transport = ros_conv::imageTransportParam(pnh);
+  if (transport == "compressed") live_source_ = "stereo/{left,right}/image_raw/compressed";
   sync_ = std::make_unique<ros_conv::StereoSync>();
   sync_->subscribe(nh, "image_raw", queue_size, approximate_sync,
                    [this](const sensor_msgs::Image::ConstPtr& li, const sensor_msgs::CameraInfo::ConstPtr& lc,
                           const sensor_msgs::Image::ConstPtr& ri,
                           const sensor_msgs::CameraInfo::ConstPtr& rc) { onStereo(*li, *lc, *ri, *rc); },
-                   ros_conv::imageTransportParam(pnh));
-  if (ros_conv::imageTransportParam(pnh) == "compressed") live_source_ = "stereo/{left,right}/image_raw/compressed";
+                   transport);
   const auto& o = measurer_.options().induration;
   const auto& po = measurer_.options();
   log_.info("reference '" + o.reference_model + "', plaques above " + std::to_string(o.min_height * 1e3) + " mm; depth " +

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 #include "skin3d/sim/skin.h"
 
@@ -29,6 +30,16 @@ SkinGeometry circularLimb(double dome = 0.0) {
   side.height = 0.2e-3;
   g.plaques.push_back(side);
   return g;
+}
+
+/** A scene of `g` must be refused with an error that names `field`. */
+void expectRefusedNaming(const SkinGeometry& g, const std::string& field) {
+  try {
+    SkinScene s(g, 1);
+    ADD_FAILURE() << "accepted; expected an error naming " << field;
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
@@ -110,13 +121,8 @@ TEST(SimSkin, RandomScenesAreDeterministicAndCoverTheRange) {
 
 TEST(SimSkin, BadGeometryIsNamed) {
   SkinGeometry g = circularLimb();
-  g.plaques[0].ramp = 0.01;
-  try {
-    SkinScene s(g, 1);
-    FAIL() << "a ramp wider than the plaque was accepted";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("plaques[0].ramp"), std::string::npos) << e.what();
-  }
+  g.plaques[0].ramp = 0.01;  // wider than the plaque
+  expectRefusedNaming(g, "plaques[0].ramp");
 }
 
 TEST(SimSkin, ARidgeIsHealthyReliefUnderThePlaquesOnIt) {
@@ -150,10 +156,5 @@ TEST(SimSkin, ARidgeIsHealthyReliefUnderThePlaquesOnIt) {
   EXPECT_NEAR(scene.plaqueTruth(1, 20e-6).top_height, SkinScene(circularLimb(), 7).plaqueTruth(1, 20e-6).top_height, 1e-12);
   // a bad ridge is named
   g.ridges[0].height = 0;
-  try {
-    SkinScene s(g, 1);
-    FAIL() << "a ridge of no height was accepted";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("ridges[0].height"), std::string::npos) << e.what();
-  }
+  expectRefusedNaming(g, "ridges[0].height");
 }

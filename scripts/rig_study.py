@@ -5,11 +5,12 @@
 own seeds), process_bag --induration measures it with the defaults and nothing but the calibration, and
 skin_check.py compares the result with the generator's truth. Prints a Markdown table, one row per rig and seed:
 coverage of the visible skin (and of the working band), the depth range found, the detection threshold, the
-plaques of at least 0.1 mm in the working band found and their worst top-height error, the false plaques, and
-whether the reference followed the skin.
+plaques of at least 0.1 mm in the working band found, their worst top-height error and the worst ratio of an
+error to the top's stated uncertainty, the false plaques, and whether the reference followed the skin.
 
-Usage: rig_study.py [--out DIR] [--seeds N ...] [--rigs NAME ...] [--bin DIR] [--list]
+Usage: rig_study.py [--out DIR] [--seeds N ...] [--rigs NAME ...] [--bin DIR] [--reuse] [--list]
   --out DIR    work folder (default /tmp/skin3d_rig_study): the bags, truths and results stay there
+  --reuse      measure the bags already in DIR again when their scene file is unchanged (no new render)
   --seeds      seeds of the scenes (default 21 22)
   --rigs       only these rigs (default: all; --list shows them)
   --bin        folder of make_dataset and process_bag (default: build/devel/lib/skin3d of this source tree)
@@ -54,13 +55,14 @@ def figures(check_text, results_dir):
     m = re.search(r"visible skin with a disparity: ([\d.]+) % \(seen at <= 60 deg: ([\d.]+) %\)", check_text)
     out["coverage"] = "%s / %s" % (m.group(1), m.group(2)) if m else "?"
     m = re.search(r"plaques >= 0.1 mm in the working band: (\d+), found (\d+), worst error (\S+) mm, "
-                  r"PASI right (\d+), extra (\d+)", check_text)
+                  r"worst error / sigma (\S+), PASI right (\d+), extra (\d+)", check_text)
     if m:
         out["plaques"] = "%s of %s" % (m.group(2), m.group(1))
         out["worst"] = m.group(3)
-        out["extra"] = m.group(5)
+        out["z"] = m.group(4)
+        out["extra"] = m.group(6)
     else:
-        out["plaques"] = out["worst"] = out["extra"] = "?"
+        out["plaques"] = out["worst"] = out["z"] = out["extra"] = "?"
     try:
         with open(os.path.join(results_dir, "induration.yaml")) as f:
             fr = (yaml.safe_load(f).get("frames") or [{}])[-1]
@@ -81,6 +83,7 @@ def main():
     ap.add_argument("--rigs", nargs="*", default=[])
     ap.add_argument("--bin", default=os.path.join(os.path.dirname(HERE), "build", "devel", "lib", "skin3d"))
     ap.add_argument("--list", action="store_true")
+    ap.add_argument("--reuse", action="store_true")
     a = ap.parse_args()
     if a.list:
         for name, r in RIGS.items():
@@ -95,14 +98,18 @@ def main():
             return 1
     os.makedirs(a.out, exist_ok=True)
     print("| rig | seed | visible skin / band measured (%) | depth range found (m) | detection threshold (mm) | "
-          "plaques >= 0.1 mm found | worst top error (mm) | false plaques | reference follows |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "plaques >= 0.1 mm found | worst top error (mm) | worst error / stated sigma | false plaques | "
+          "reference follows |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in (a.rigs or RIGS):
         for seed in a.seeds:
             base = os.path.join(a.out, "%s_%d" % (name, seed))
+            scene = rig_yaml(RIGS[name], seed)
+            same = a.reuse and os.path.exists(base + ".bag") and os.path.exists(base + ".yaml") and \
+                open(base + ".yaml").read() == scene
             with open(base + ".yaml", "w") as f:
-                f.write(rig_yaml(RIGS[name], seed))
-            if run([os.path.join(a.bin, "make_dataset"), "skin", "--quiet", "--config", base + ".yaml",
+                f.write(scene)
+            if not same and run([os.path.join(a.bin, "make_dataset"), "skin", "--quiet", "--config", base + ".yaml",
                     "--out", base + ".bag"], base + ".make.log"):
                 print("| %s | %d | make_dataset failed: %s.make.log |" % (name, seed, base))
                 continue
@@ -116,9 +123,9 @@ def main():
             with open(base + ".check.txt", "w") as f:
                 f.write(check)
             g = figures(check, base)
-            print("| %s | %d | %s | %s | %s | %s | %s | %s | %s |" % (name, seed, g["coverage"], g["range"],
-                                                                    g["threshold"], g["plaques"], g["worst"],
-                                                                    g["extra"], g["follows"]), flush=True)
+            print("| %s | %d | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+                name, seed, g["coverage"], g["range"], g["threshold"], g["plaques"], g["worst"], g["z"], g["extra"],
+                g["follows"]), flush=True)
     return 0
 
 

@@ -8,7 +8,7 @@ Usage: skin_check.py DATASET.bag RESULTS_DIR
   RESULTS_DIR  of `process_bag --induration` on it (reads induration.yaml and the last frame's disparity.tiff)
 Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence by both cameras: the working band)
 and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
-top height and its error, the measured mean over the interior and over the footprint (volume / area), PASI class
+top height with its stated standard uncertainty, its error and the error over that uncertainty, the measured mean over the interior and over the footprint (volume / area), PASI class
 (measured/true), area and measured share; then a summary line over the plaques of
 at least 0.1 mm in the working band (the ones the instrument must measure).
 """
@@ -50,12 +50,12 @@ def main(argv=None):
     ref = last.get("reference") or {}
     print("reference: %s (candidates: %s)" % (ref.get("model"), ", ".join(
         "%s %.4f mm" % (c["model"], c["scale_mm"]) for c in ref.get("candidates") or [])))
-    print("| true top (mm) | true mean (mm) | around limb (deg) | incidence L/R (deg) | measured top (mm) | error (mm) "
-          "| measured mean: interior, footprint (mm) | PASI | area (mm², true) | share |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| true top (mm) | true mean (mm) | around limb (deg) | incidence L/R (deg) | measured top ± sigma (mm) | error (mm) "
+          "| error / sigma | measured mean: interior, footprint (mm) | PASI | area (mm², true) | share |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     right = np.array(truth["rig_true"]["right_centre_in_left_m"])
     required = found = pasi_ok = 0
-    worst = 0.0
+    worst = worst_z = 0.0
     for p in truth.get("plaques") or []:
         c = np.array(p["centroid_left_m"])
         n = np.array(p["normal_left"])
@@ -66,17 +66,21 @@ def main(argv=None):
         inc = "%.0f/%.0f%s" % (inc_l, inc_r, "" if max(inc_l, inc_r) <= 60 else " (outside)")
         best = min(measured, key=lambda q: np.linalg.norm(np.array(q["centroid_m"]) - c), default=None)
         if best is None or np.linalg.norm(np.array(best["centroid_m"]) - c) > 3e-3:
-            print("| %.3f | %.3f | %.0f | %s | not found | | | %d | (%.0f) | |" % (
+            print("| %.3f | %.3f | %.0f | %s | not found | | | | %d | (%.0f) | |" % (
                 p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, p["pasi_class"], p["area_mm2"]))
             continue
         top = best.get("top_height_mm", best["mean_height_mm"])  # results before the top height: the mean
         err = top - p["height_mm"]
+        sigma = best.get("top_height_sigma_mm")
+        z = err / sigma if sigma else float("nan")
         if req:
             found += 1
             worst = max(worst, abs(err))
+            worst_z = max(worst_z, abs(z)) if np.isfinite(z) else worst_z
             pasi_ok += best["pasi_class"] == p["pasi_class"]
-        print("| %.3f | %.3f | %.0f | %s | %.4f | %+.4f | %.3f, %.3f | %d/%d | %.0f (%.0f) | %.2f |" % (
-            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, top, err, best["mean_height_mm"],
+        print("| %.3f | %.3f | %.0f | %s | %.4f ± %.4f | %+.4f | %+.1f | %.3f, %.3f | %d/%d | %.0f (%.0f) | %.2f |" % (
+            p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, top, sigma if sigma else float("nan"),
+            err, z, best["mean_height_mm"],
             best.get("volume_mm3", float("nan")) / best["area_mm2"],
             best["pasi_class"], p["pasi_class"], best["area_mm2"], p["area_mm2"], best.get("measured_share", float("nan"))))
     print("measured plaques: %d" % len(measured))
@@ -119,8 +123,9 @@ def main(argv=None):
         print("reference follows the skin: %s (unfollowed share of the working band %.1f %%; %s)" % (
             "yes" if ref.get("follows_skin", True) else "no", 100 * ref.get("unfollowed_share", 0.0),
             "reference_unfollowed.png: %d px" % (unf > 0).sum() if unf is not None else "no reference_unfollowed.png"))
-    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, PASI right %d, extra %d%s"
-          % (required, found, worst, pasi_ok, len(extra), " (%d on a ridge)" % on_ridge if ridges else ""))
+    print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, worst error / sigma %.1f, "
+          "PASI right %d, extra %d%s"
+          % (required, found, worst, worst_z, pasi_ok, len(extra), " (%d on a ridge)" % on_ridge if ridges else ""))
 
 
 if __name__ == "__main__":

@@ -363,6 +363,7 @@ skin3d::IndurationReport toReportMsg(const induration::IndurationResult& r, cons
     q.centroid.z = p.centroid.z();
     q.area = p.area;
     q.top_height = p.top_height;
+    q.top_height_sigma = p.top_height_sigma;
     q.mean_height = p.mean_height;
     q.max_height = p.max_height;
     q.std_height = p.std_height;

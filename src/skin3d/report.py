@@ -167,13 +167,15 @@ def induration_section(run):
     if frames:
         last = frames[-1]
         t = [[esc(p.get("id")), "%.1f %.1f %.1f" % tuple(1e3 * np.array(p["centroid_m"])), fmt(p.get("area_mm2"), "%.1f"),
-              fmt(p.get("top_height_mm")), fmt(p.get("mean_height_mm")), fmt(p.get("max_height_mm")), fmt(p.get("std_height_mm")),
+              fmt(p.get("top_height_mm")), fmt(p.get("top_height_sigma_mm")), fmt(p.get("mean_height_mm")),
+              fmt(p.get("max_height_mm")), fmt(p.get("std_height_mm")),
               esc(p.get("pasi_class"))] for p in last.get("plaques") or []]
         ref = last.get("reference") or {}
         parts.append("<h3>Last frame: %d plaque(s); reference %s, RMS %s mm over %s points; %.1f %% matched</h3>" % (
             len(t), esc(ref.get("model", "?")), fmt(ref.get("rms_mm")), esc(ref.get("points", "?")),
             100 * float(last.get("valid_fraction", 0))))
-        parts.append(table(["plaque", "centroid x y z (mm)", "area (mm²)", "top (mm)", "mean (mm)", "max (mm)", "std (mm)", "PASI"], t))
+        parts.append(table(["plaque", "centroid x y z (mm)", "area (mm²)", "top (mm)", "top σ (mm)", "mean (mm)", "max (mm)",
+                            "std (mm)", "PASI"], t))
         w = last.get("warnings") or []
         if w:
             parts.append("<details><summary>%d warning(s)</summary><ul>%s</ul></details>" % (

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 using namespace skin3d;
@@ -39,6 +40,8 @@ struct Scene {
   std::vector<Box> boxes;
   std::vector<Round> rounds;
   double noise = 5e-6;                                    // m along the ray
+  double noise_blur_px = 0.0;  // > 0: the noise is correlated like a matcher's, white noise blurred by a Gaussian of
+                               // this sigma and scaled back to `noise` (its correlation area is 4 pi sigma^2 px^2)
   int width = 400, height = 300;
   double f = 700;
   std::uint64_t seed = 7;
@@ -68,6 +71,13 @@ struct Scene {
     std::mt19937_64 rng(seed);
     std::normal_distribution<double> n(0.0, 1.0);
     std::uniform_real_distribution<double> uni(0.0, 1.0);
+    cv::Mat field(height, width, CV_64F);
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) field.at<double>(y, x) = n(rng);
+    if (noise_blur_px > 0) {
+      cv::GaussianBlur(field, field, cv::Size(), noise_blur_px, noise_blur_px, cv::BORDER_REFLECT);
+      field *= std::sqrt(4 * M_PI) * noise_blur_px;  // a unit-variance white field blurred has variance 1 / (4 pi s^2)
+    }
     for (int y = 0; y < height; ++y)
       for (int x = 0; x < width; ++x) {
         const Eigen::Vector3d r = Eigen::Vector3d((x - width / 2.0) / f, (y - height / 2.0) / f, 1).normalized();
@@ -81,7 +91,7 @@ struct Scene {
           const Eigen::Vector3d q = X - origin;
           h = surface(q.dot(e1), q.dot(e2));
         }
-        X += r * (noise * n(rng));
+        X += r * (noise * field.at<double>(y, x));
         if (outliers && uni(rng) < 0.002) X += r * 0.01;  // gross mismatches, 10 mm along the ray
         c.xyz.at<cv::Vec3f>(y, x) = cv::Vec3f(X.x(), X.y(), X.z());
       }
@@ -242,6 +252,57 @@ TEST(Induration, TopHeightOfFlatAndDomedPlaques) {
     if (t.dome > 0) {
       EXPECT_LT(best->mean_height, t.height * (1 - 0.1 * t.dome)) << "the dome must matter in this scene";
     }
+  }
+}
+
+TEST(Induration, TheTopsStatedUncertaintyIsItsSpreadOverNoiseDraws) {
+  // Correlated height noise like a coarse rig's (40 um per pixel, correlated over a 2 px Gaussian: 50 px^2): the
+  // measured noise and correlation area must be the generator's, and each plaque's stated top uncertainty the
+  // spread of its top over independent noise draws (within the spread's own sampling error: 30 draws, +-13 %).
+  constexpr int kDraws = 30;
+  const double blur = 2.0, noise = 40e-6;
+  const std::vector<Round> rounds = {{-0.016, 0.0, 0.008, 0.4e-3, 1.0e-3, 0.0}, {0.016, 0.0, 0.007, 0.7e-3, 1.0e-3, 0.5}};
+  std::vector<std::vector<double>> tops(rounds.size()), sigmas(rounds.size());
+  double noise_sum = 0, area_sum = 0;
+  for (int d = 0; d < kDraws; ++d) {
+    Scene s;
+    s.width = 600;
+    s.height = 450;
+    s.f = 1050;  // about 0.24 mm per pixel
+    s.rounds = rounds;
+    s.noise = noise;
+    s.noise_blur_px = blur;
+    s.seed = 100 + d;
+    const auto r = measureInduration(s.cloud(), IndurationOptions());
+    ASSERT_TRUE(r.reference_ok);
+    noise_sum += r.height_noise;
+    area_sum += r.noise_correlation_px2;
+    for (std::size_t k = 0; k < rounds.size(); ++k) {
+      const Eigen::Vector3d c = s.origin + rounds[k].u * s.e1 + rounds[k].v * s.e2;
+      const induration::Plaque* best = nullptr;
+      for (const auto& p : r.plaques)
+        if ((p.centroid - c).norm() < 2e-3) best = &p;
+      ASSERT_NE(best, nullptr) << "draw " << d << ": plaque of " << rounds[k].height * 1e3 << " mm not found";
+      tops[k].push_back(best->top_height);
+      sigmas[k].push_back(best->top_height_sigma);
+    }
+  }
+  // the noise along the normal: along the ray times the cosine of the incidence (0.35 and 0.1 rad of tilt)
+  const double along_normal = noise * std::cos(0.35) * std::cos(0.1);
+  EXPECT_NEAR(noise_sum / kDraws, along_normal, 0.1 * along_normal);
+  const double true_area = 4 * M_PI * blur * blur;
+  EXPECT_NEAR(area_sum / kDraws, true_area, 0.3 * true_area);
+  for (std::size_t k = 0; k < rounds.size(); ++k) {
+    double m = 0, v = 0, stated = 0;
+    for (double t : tops[k]) m += t / kDraws;
+    for (double t : tops[k]) v += (t - m) * (t - m) / (kDraws - 1);
+    for (double sg : sigmas[k]) stated += sg / kDraws;
+    const double spread = std::sqrt(v);
+    std::printf("plaque %.1f mm, dome %.1f: top %.4f mm (true %.4f), spread %.1f um, stated %.1f um\n",
+                rounds[k].height * 1e3, rounds[k].dome, m * 1e3, rounds[k].height * 1e3, spread * 1e6, stated * 1e6);
+    EXPECT_GT(stated, spread / 1.5) << "plaque " << k << ": stated uncertainty below the spread of its tops";
+    EXPECT_LT(stated, spread * 1.5) << "plaque " << k << ": stated uncertainty far above the spread of its tops";
+    EXPECT_LT(std::fabs(m - rounds[k].height), 3 * stated) << "plaque " << k << ": the tops are biased";
   }
 }
 

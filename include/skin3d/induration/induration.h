@@ -135,6 +135,13 @@ struct Plaque {
   double top_height = 0;
   double mean_height = 0, max_height = 0, std_height = 0;  //!< m, over the interior
   double mean_height_sigma = 0;  //!< m, standard error of the mean height (from the per-point sigmas)
+  /** m: standard uncertainty of top_height: the plaque's own height noise (its interior's scatter about a
+   *  quadratic, counted with the noise's correlation area) over the heights the top rests on and, added in
+   *  quadrature, surround_offset beyond what the ring's own noise explains */
+  double top_height_sigma = 0;
+  /** m: median height of the healthy skin in a ring around the plaque (0 where the reference follows the skin
+   *  there; its departure is part of the top's uncertainty) */
+  double surround_offset = 0;
   int pasi_class = 0;
   int pixels = 0;
   double measured_fraction = 0;  //!< share of the plaque's footprint that has a height (the rest: matcher gaps)
@@ -165,6 +172,8 @@ struct IndurationResult {
   /** The healthy skin's robust scatter about the reference over the matcher's median stated depth sigma (1: the
    *  reference explains the skin down to the noise; skin relief and model error raise it). */
   double reference_noise_ratio = std::numeric_limits<double>::quiet_NaN();
+  double height_noise = std::numeric_limits<double>::quiet_NaN();  //!< m: the healthy skin's robust per-pixel height sigma
+  double noise_correlation_px2 = 1;  //!< px^2: the area over which that noise is correlated (the matcher's window)
 };
 
 /** @brief PASImeter class of a height (m) with the given increasing boundaries (m). */

@@ -119,7 +119,13 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                            "healthy skin's heights after " + num(best.smoothing) + " px of smoothing; min_height is " +
                            num(o.min_height * 1e3) + " mm): lower ones cannot be told from the noise (a nearer working "
                            "distance, a longer baseline or a finer camera lowers it)");
-  findPlaques(s, hs, band, reach, res.detection_threshold, best.smoothing, res);
+  // the height noise the plaques' uncertainties rest on, in blocks of 4 matcher ramps (the noise's correlation
+  // reaches about one matching window)
+  const HeightNoise noise = heightNoise(res.height_map, s.known_mask & ~best.plaque_mask & band,
+                                        std::max(8, 4 * o.interior_margin_px));
+  res.height_noise = noise.sigma;
+  res.noise_correlation_px2 = noise.correlation_area;
+  findPlaques(s, hs, band, reach, res.detection_threshold, best.smoothing, noise, res);
   checkReferenceFollows(s, hs, band, res);
   if (res.plaques.empty())
     res.warnings.push_back(res.reference_follows

@@ -73,7 +73,15 @@ cv::Mat footprint(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Rec
 double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_height, double band);
 double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, double limit, double min_height, double band,
                          cv::Mat* smoothed);
-double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin);
+double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin, double noise_density, double* sigma);
+/** The healthy skin's height noise: its robust per-pixel sigma about the heights' slow trend, and its correlation
+ *  area (px^2: block^2 times the variance of block x block means over the per-pixel variance, 1 ... block^2). */
+struct HeightNoise {
+  double sigma = std::numeric_limits<double>::quiet_NaN();  //!< m
+  double correlation_area = 1;                              //!< px^2
+  int blocks = 0;                                           //!< blocks it was measured on
+};
+HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block);
 cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre);
 cv::Mat workingBand(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre, double max_deg);
 cv::Mat holesOf(const cv::Mat& mask);
@@ -98,7 +106,7 @@ Alternation chooseReference(const Surface& s, const ReferenceSurface& start,
 // ---- induration_plaques.cpp
 /** The plaques (PlaqueSearch): into res.plaques, res.labels and res.warnings. */
 void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-                 double smoothing, IndurationResult& res);
+                 double smoothing, const HeightNoise& noise, IndurationResult& res);
 
 }  // namespace induration_detail
 }  // namespace induration

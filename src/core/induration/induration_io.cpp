@@ -105,6 +105,10 @@ void emitReference(YAML::Emitter& y, const IndurationResult& r) {
   y << YAML::Key << "follows_skin" << YAML::Value << r.reference_follows;
   y << YAML::Key << "unfollowed_share" << YAML::Value << r.unfollowed_share;
   if (std::isfinite(r.reference_noise_ratio)) y << YAML::Key << "noise_ratio" << YAML::Value << r.reference_noise_ratio;
+  if (std::isfinite(r.height_noise)) {
+    y << YAML::Key << "height_noise_mm" << YAML::Value << kMm * r.height_noise;
+    y << YAML::Key << "noise_correlation_px2" << YAML::Value << r.noise_correlation_px2;
+  }
   y << YAML::Key << "candidates" << YAML::Value << YAML::BeginSeq;  // every model tried, robust scale of its healthy residuals
   for (const auto& c : s.candidates)
     y << YAML::Flow << YAML::BeginMap << YAML::Key << "model" << YAML::Value << c.first << YAML::Key << "scale_mm"
@@ -144,6 +148,10 @@ void emitPlaque(YAML::Emitter& y, const Plaque& p) {
   y << YAML::Key << "std_height_mm" << YAML::Value << kMm * p.std_height;
   y << YAML::Key << "mean_height_sigma_mm" << YAML::Value;
   emitNumber(y, kMm * p.mean_height_sigma);
+  y << YAML::Key << "top_height_sigma_mm" << YAML::Value;
+  emitNumber(y, kMm * p.top_height_sigma);
+  y << YAML::Key << "surround_offset_mm" << YAML::Value;
+  emitNumber(y, kMm * p.surround_offset);
   y << YAML::Key << "pasi_class" << YAML::Value << p.pasi_class;
   y << YAML::Key << "pixels" << YAML::Value << p.pixels;
   y << YAML::Key << "measured_share" << YAML::Value << p.measured_fraction;
@@ -190,7 +198,7 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
     matches.push_back(f == 0 ? identity : matchPlaques(base, frames[f].result.plaques));
   }
   for (size_t i = 0; i < base.size(); ++i) {
-    std::vector<double> top, mean, max, stdh, area, sigma;
+    std::vector<double> top, mean, max, stdh, area, sigma, top_sigma;
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     y << YAML::BeginMap;
     y << YAML::Key << "id" << YAML::Value << base[i].id;
@@ -209,6 +217,7 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
       stdh.push_back(p.std_height);
       area.push_back(p.area);
       sigma.push_back(p.mean_height_sigma);
+      top_sigma.push_back(p.top_height_sigma);
       centroid += p.centroid;
     }
     y << YAML::EndSeq;
@@ -221,6 +230,7 @@ void emitRepeatability(YAML::Emitter& y, const std::vector<FrameRecord>& frames,
     emitMeanStd(y, "std_height_mm", stdh, kMm);
     emitMeanStd(y, "area_mm2", area, kMm2);
     emitMeanStd(y, "mean_height_sigma_mm", sigma, kMm);
+    emitMeanStd(y, "top_height_sigma_mm", top_sigma, kMm);
     y << YAML::Key << "pasi_class_of_mean" << YAML::Value << pasiClass(meanStd(top).first, options.pasi_boundaries);
     y << YAML::EndMap;
   }
@@ -517,7 +527,11 @@ cv::Mat heightMapImage(const cv::Mat& height_map, const cv::Mat& labels, const s
     }
     if (box.empty()) continue;
     char text[64];
-    std::snprintf(text, sizeof(text), "%d: %.2f mm", p.id, kMm * p.top_height);
+    // the top's uncertainty where it shows at this precision
+    if (kMm * p.top_height_sigma >= 0.005)
+      std::snprintf(text, sizeof(text), "%d: %.2f +- %.2f mm", p.id, kMm * p.top_height, kMm * p.top_height_sigma);
+    else
+      std::snprintf(text, sizeof(text), "%d: %.2f mm", p.id, kMm * p.top_height);
     int baseline = 0;
     const cv::Size ts = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, font, 1, &baseline);
     cv::Point at = toCanvas(cv::Point2d(box.x, box.y));

@@ -241,9 +241,11 @@ double rayHit(const ReferenceSurface& ref, const Eigen::Vector3d& r) {
  * dome is kept only if the centre is higher and the curvature significant (-b over its standard error, from the
  * fit's own residuals, above 3); otherwise the top is flat (or dished: its highest level is not at the centre)
  * and its height is the weighted mean of the bins (less noisy than extrapolating).
- * NaN if fewer than 30 heights are that deep.
+ * NaN if fewer than 30 heights are that deep. `sigma`: the top's standard deviation from the height noise
+ * (`noise_density`: its per-pixel variance times its correlation area, m^2 px^2; see heightNoise), NaN with it.
  */
-double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin) {
+double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin, double noise_density, double* sigma) {
+  *sigma = std::numeric_limits<double>::quiet_NaN();
   cv::Mat dist;
   cv::distanceTransform(mask, dist, cv::DIST_L2, cv::DIST_MASK_5);
   double dmax = 0;
@@ -277,13 +279,68 @@ double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin) {
     swm += w * m;
   }
   if (!(sw > 0)) return std::numeric_limits<double>::quiet_NaN();
+  // The noise of a bin's median of w heights is about (pi/2) noise_density / w (noise_density: the per-pixel
+  // variance times the noise's correlation area, so w correlated heights count as w / area independent ones);
+  // with the bins weighted by w, the weighted fit's covariance is then (pi/2) noise_density A^-1, and the flat
+  // top's variance (pi/2) noise_density / sum w.
+  const double c = 0.5 * 3.14159265358979323846 * noise_density;
   const double flat = swm / sw;
+  *sigma = std::sqrt(c / sw);
   if (pts.size() < 5 || !(std::fabs(A.determinant()) > 1e-12 * A.squaredNorm())) return flat;
   const Eigen::Vector2d ab = A.ldlt().solve(rhs);
   double ssr = 0;
   for (const auto& p : pts) ssr += p(2) * std::pow(p(1) - ab(0) - ab(1) * p(0), 2);
-  const double var_b = ssr / (pts.size() - 2) * A.inverse()(1, 1);
-  return var_b > 0 && ab(1) < -3 * std::sqrt(var_b) ? ab(0) : flat;
+  const Eigen::Matrix2d Ai = A.inverse();
+  const double var_b = ssr / (pts.size() - 2) * Ai(1, 1);
+  if (!(var_b > 0 && ab(1) < -3 * std::sqrt(var_b))) return flat;
+  *sigma = std::sqrt(c * Ai(0, 0));
+  return ab(0);
+}
+
+HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block) {
+  HeightNoise out;
+  cv::Mat hu(h.size(), CV_32F, cv::Scalar(kNaN));
+  h.copyTo(hu, use & (h == h));
+  // residuals about the heights' own slow trend (a reference that bends away from the skin over centimetres is
+  // not noise: it would inflate the block means' scatter)
+  const cv::Mat trend = smoothNaN(hu, 2.0 * block);
+  cv::Mat r = hu - trend;  // NaN where hu is
+  std::vector<float> px, means;
+  for (int y = 0; y < r.rows; y += 2) {
+    const float* p = r.ptr<float>(y);
+    for (int x = 0; x < r.cols; x += 2)
+      if (std::isfinite(p[x])) px.push_back(p[x]);
+  }
+  for (int by = 0; by + block <= r.rows; by += block)
+    for (int bx = 0; bx + block <= r.cols; bx += block) {
+      double sum = 0;
+      int n = 0;
+      for (int y = by; y < by + block; ++y) {
+        const float* p = r.ptr<float>(y);
+        for (int x = bx; x < bx + block; ++x)
+          if (std::isfinite(p[x])) {
+            sum += p[x];
+            ++n;
+          }
+      }
+      if (n >= 0.9 * block * block) means.push_back(static_cast<float>(sum / n));
+    }
+  auto robustSigma = [](std::vector<float>& v) {
+    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    const float med = *mid;
+    for (float& x : v) x = std::fabs(x - med);
+    std::nth_element(v.begin(), mid, v.end());
+    return 1.4826 * *mid;
+  };
+  if (px.size() < 100) return out;
+  out.sigma = robustSigma(px);
+  out.blocks = static_cast<int>(means.size());
+  if (means.size() < 20 || !(out.sigma > 0)) return out;
+  const double sb = robustSigma(means);
+  out.correlation_area = std::min(static_cast<double>(block) * block,
+                                  std::max(1.0, static_cast<double>(block) * block * sb * sb / (out.sigma * out.sigma)));
+  return out;
 }
 
 /**

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Induration measurement: the plaque search. See include/skin3d/induration/induration.h.
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -21,6 +22,12 @@ namespace {
  *  measured: a warning says so. */
 constexpr double kOpenOutline = 0.1;
 
+/** m: half of a plaque's border ramp at its widest. Psoriatic plaques are sharply demarcated: the skin rises to the
+ *  plateau within about 2 mm (the skin generator draws 0.5-1.5 mm), and the half-height outline lies mid-ramp. */
+constexpr double kHalfRamp = 1.0e-3;
+/** m: the healthy-skin ring around a plaque is at least this wide (its heights' median and scatter). */
+constexpr double kRingWidth = 1.0e-3;
+
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
   double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
@@ -41,8 +48,8 @@ std::string atPixel(const cv::Rect& box) {
 class PlaqueSearch {
  public:
   PlaqueSearch(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-               double smoothing, IndurationResult& res)
-      : s_(s), o_(s.o), hs_(hs), reach_(reach), threshold_(threshold), smoothing_(smoothing), res_(res) {
+               double smoothing, const HeightNoise& noise, IndurationResult& res)
+      : s_(s), o_(s.o), hs_(hs), reach_(reach), threshold_(threshold), smoothing_(smoothing), noise_(noise), res_(res) {
     // A plaque cut by a narrow unknown or low strip (a step edge the matcher could not follow, a line of noise)
     // is one plaque: regions closer than about one interior margin are joined (closing) before labelling.
     const int jr = (o_.interior_margin_px + 1) / 2;
@@ -296,6 +303,88 @@ class PlaqueSearch {
     return false;
   }
 
+  /** The healthy skin around a plaque's footprint `fp` (in `box`; `pixel_m`: a pixel's size on the skin there): a
+   *  ring beyond the reach of its edge, as wide as the matcher's ramp (2 interior_margin_px, at least 8 px) or
+   *  kRingWidth, whichever is wider, known, in the working band, on no plaque and no other raised core. The edge
+   *  reaches beyond the half-height outline by half the plaque's border ramp (kHalfRamp) and by the blur of the
+   *  smoothing, the matcher's ramp and the exclusion margin. */
+  struct Surround {
+    double offset = kNaN, sigma = kNaN;  //!< m: median height and robust sigma of the ring's heights
+    int pixels = 0;
+  };
+  Surround surround(const cv::Rect& box, const cv::Mat& fp, double pixel_m) const {
+    auto px = [&](double m) { return pixel_m > 0 ? static_cast<int>(std::ceil(std::min(200.0, m / pixel_m))) : 0; };
+    const int r1 = o_.exclusion_margin_px + o_.interior_margin_px + static_cast<int>(std::ceil(2 * smoothing_)) + px(kHalfRamp);
+    const int r2 = r1 + std::max({8, 2 * o_.interior_margin_px, px(kRingWidth)});
+    const cv::Rect win = cv::Rect(box.x - r2, box.y - r2, box.width + 2 * r2, box.height + 2 * r2) &
+                         cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
+    cv::Mat full = cv::Mat::zeros(win.size(), CV_8U), d1, d2;
+    full(box - win.tl()).setTo(255, fp);
+    cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
+    cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));
+    std::vector<float> v;
+    for (int y = 0; y < win.height; ++y)
+      for (int x = 0; x < win.width; ++x) {
+        if (!d2.at<uchar>(y, x) || d1.at<uchar>(y, x)) continue;
+        const int gy = y + win.y, gx = x + win.x;
+        if (!reach_.at<uchar>(gy, gx) || final_labels_.at<int>(gy, gx) != 0 || lab_.at<int>(gy, gx) != 0) continue;
+        const float h = res_.height_map.at<float>(gy, gx);
+        if (std::isfinite(h)) v.push_back(h);
+      }
+    Surround out;
+    out.pixels = static_cast<int>(v.size());
+    if (v.size() < 30) return out;
+    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    out.offset = *mid;
+    for (float& x : v) x = std::fabs(x - static_cast<float>(out.offset));
+    std::nth_element(v.begin(), mid, v.end());
+    out.sigma = 1.4826 * *mid;
+    return out;
+  }
+
+  /** Robust per-pixel sigma of the heights of a plaque's interior (footprint `fp` in `box`, eroded by
+   *  interior_margin_px) about their own shape (a least-squares quadratic in the pixel coordinates: a flat or
+   *  domed top, tilted; its 6 parameters take a negligible share of the noise); NaN under 100 heights. */
+  double interiorNoise(const cv::Rect& box, const cv::Mat& fp) const {
+    cv::Mat interior = fp.clone();
+    if (o_.interior_margin_px > 0)
+      cv::erode(fp, interior,
+                cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o_.interior_margin_px + 1, 2 * o_.interior_margin_px + 1)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+    std::vector<Eigen::Vector3d> pts;  // (x, y, h), x and y about the box centre in units of its half size
+    const double cx = 0.5 * box.width, cy = 0.5 * box.height, sc = std::max(1.0, 0.5 * std::max(box.width, box.height));
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x) {
+        const float h = res_.height_map.at<float>(y + box.y, x + box.x);
+        if (interior.at<uchar>(y, x) && std::isfinite(h)) pts.emplace_back((x - cx) / sc, (y - cy) / sc, h);
+      }
+    if (pts.size() < 100) return kNaN;
+    auto basis = [](const Eigen::Vector3d& q) {
+      Eigen::Matrix<double, 6, 1> f;
+      f << 1, q.x(), q.y(), q.x() * q.x(), q.x() * q.y(), q.y() * q.y();
+      return f;
+    };
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+    for (const auto& q : pts) {
+      const Eigen::Matrix<double, 6, 1> f = basis(q);
+      A += f * f.transpose();
+      b += f * q.z();
+    }
+    const Eigen::Matrix<double, 6, 1> c = A.ldlt().solve(b);
+    if (!c.allFinite()) return kNaN;
+    std::vector<float> r;
+    r.reserve(pts.size());
+    for (const auto& q : pts) r.push_back(static_cast<float>(q.z() - basis(q).dot(c)));
+    auto mid = r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2);
+    std::nth_element(r.begin(), mid, r.end());
+    const float med = *mid;
+    for (float& v : r) v = std::fabs(v - med);
+    std::nth_element(r.begin(), mid, r.end());
+    return 1.4826 * *mid;
+  }
+
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
   void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t) {
     Plaque p;
@@ -312,8 +401,27 @@ class PlaqueSearch {
     // footprint's outline: where a plaque runs into unmeasured skin, the region's part in the gap would move
     // its deepest point off the measured top (partly measured plaques of seeds 5, 8, 11: +28.5, -6.8, +10.1 um
     // -> +21.7, -2.9, +6.4 um; seeds 9 and 10, not looked at for this: within 2 um)
-    p.top_height = topHeight(foot.pixels, res_.height_map(box), o_.interior_margin_px);
-    if (!std::isfinite(p.top_height)) p.top_height = p.max_height;
+    // Its uncertainty: the plaque's own height noise (a scaly plaque gives the matcher more texture than the skin
+    // around it: on the rendered limb its heights scatter 2.4-3.5 times less), counted with the correlation area
+    // measured on the healthy skin (the matcher's window sets it); and the skin around it standing off the
+    // reference beyond what the ring's own noise explains (the reference's local error).
+    const double pixel_m = std::sqrt(t.area / std::max(1, t.px));
+    const Surround sur = surround(box, foot.pixels, pixel_m);
+    p.surround_offset = sur.offset;
+    double sig = interiorNoise(box, foot.pixels);
+    if (!std::isfinite(sig)) sig = sur.pixels >= 100 ? sur.sigma : noise_.sigma;
+    const double kHalfPi = 0.5 * 3.14159265358979323846;
+    double top_sigma = kNaN;
+    p.top_height = topHeight(foot.pixels, res_.height_map(box), o_.interior_margin_px,
+                             sig * sig * noise_.correlation_area, &top_sigma);
+    if (!std::isfinite(p.top_height)) {
+      p.top_height = p.max_height;
+      top_sigma = sig * std::sqrt(kHalfPi * noise_.correlation_area / nk);
+    }
+    double offset2 = 0;
+    if (std::isfinite(sur.offset) && sur.pixels > 0)
+      offset2 = std::max(0.0, sur.offset * sur.offset - kHalfPi * sur.sigma * sur.sigma * noise_.correlation_area / sur.pixels);
+    p.top_height_sigma = std::sqrt(top_sigma * top_sigma + offset2);
     p.pasi_class = pasiClass(p.top_height, o_.pasi_boundaries);
     p.pixels = t.px;
     p.measured_fraction = t.px > 0 ? t.nc / static_cast<double>(t.px) : 0.0;
@@ -387,6 +495,7 @@ class PlaqueSearch {
   const IndurationOptions& o_;
   const cv::Mat hs_, reach_;
   const double threshold_, smoothing_;
+  const HeightNoise noise_;
   IndurationResult& res_;
   cv::Mat join_, off_band_, lab_, stats_, final_labels_;
   int n_ = 0;
@@ -399,8 +508,8 @@ class PlaqueSearch {
 }  // namespace
 
 void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-                 double smoothing, IndurationResult& res) {
-  PlaqueSearch(s, hs, band, reach, threshold, smoothing, res).run();
+                 double smoothing, const HeightNoise& noise, IndurationResult& res) {
+  PlaqueSearch(s, hs, band, reach, threshold, smoothing, noise, res).run();
 }
 
 }  // namespace induration_detail

@@ -22,7 +22,9 @@
  *     regions (8-connected) of the smoothed map above the detection threshold (`min_height`, or 3 robust sigma
  *     of the smoothed healthy-skin heights where the surface is noisier), at least `min_area` on the reference
  *     (20 mm^2: a lesion under 5 mm across is a papule, not a plaque); each
- *     region's boundary is then re-drawn at `edge_fraction` of its own median height (a half-height boundary:
+ *     region's boundary is then re-drawn at `edge_fraction` of its own median height (taken from 2 sigma of the
+ *     segmentation smoothing inside the region, or its inner half: the smoothing spreads a tall plaque's region
+ *     over a skirt of healthy skin up to 2 sigma wide, which would pull the median down) (a half-height boundary:
  *     the blur of the matching window moves it neither in nor out; where the matcher left the step edge
  *     unknown, the gap is bridged from both sides so the boundary falls in its middle), holes filled; largest
  *     cores first, the box around a core widened while the region reaches its border, and a core whose region

@@ -225,7 +225,9 @@ TEST(Induration, ASurfaceTheReferenceCannotFollowIsReported) {
     std::printf("plaque at u = %.0f mm: %s, top %.3f mm (true %.3f), in the marked region: %d\n", p.u * 1e3,
                 found ? "found" : "not found", found ? found->top_height * 1e3 : 0.0, p.height * 1e3, marked);
     EXPECT_TRUE(right || marked) << "plaque at u = " << p.u << ": neither measured right nor marked";
-    if (&p == &flat) EXPECT_TRUE(right) << "the plaque on flat skin away from the ridge";
+    if (&p == &flat) {
+      EXPECT_TRUE(right) << "the plaque on flat skin away from the ridge";
+    }
   }
 }
 

@@ -435,8 +435,10 @@ class PlaqueSearch {
     p.top_height = topHeight(foot.pixels, res_.height_map(box), o_.interior_margin_px,
                              sig * sig * noise_.correlation_area, &top_sigma);
     if (!std::isfinite(p.top_height)) {
+      // the 99th percentile of heights scattered by sig stands about 2.3 sig above their level: that, not a
+      // mean's standard error, is what this top may be off by
       p.top_height = p.max_height;
-      top_sigma = sig * std::sqrt(kHalfPi * noise_.correlation_area / nk);
+      top_sigma = 2.33 * sig;
     }
     double offset2 = 0;
     if (std::isfinite(sur.offset) && sur.pixels > 0)

@@ -65,6 +65,8 @@ struct Footprint {
 };
 
 // ---- induration_maps.cpp (each documented there)
+/** Median and robust sigma (1.4826 MAD about the median) of `v` (reordered; at least one value). */
+std::pair<double, double> medianAndScale(std::vector<float>& v);
 int removeOutliers(cv::Mat& xyz, double std_ratio);
 cv::Mat heights(const cv::Mat& xyz, const ReferenceSurface& ref);
 cv::Mat smoothNaN(const cv::Mat& h, double sigma);

@@ -28,12 +28,7 @@ double robustScale(const cv::Mat& v, const cv::Mat& use, int step) {
       if (u[x] && std::isfinite(p[x])) a.push_back(p[x]);
   }
   if (a.size() < 20) return std::numeric_limits<double>::quiet_NaN();
-  auto mid = a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2);
-  std::nth_element(a.begin(), mid, a.end());
-  const float med = *mid;
-  for (float& x : a) x = std::fabs(x - med);
-  std::nth_element(a.begin(), mid, a.end());
-  return 1.4826 * *mid;
+  return medianAndScale(a).second;
 }
 
 }  // namespace

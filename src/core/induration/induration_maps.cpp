@@ -297,6 +297,15 @@ double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin, double noise
   return ab(0);
 }
 
+std::pair<double, double> medianAndScale(std::vector<float>& v) {
+  auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  const float med = *mid;
+  for (float& x : v) x = std::fabs(x - med);
+  std::nth_element(v.begin(), mid, v.end());
+  return {med, 1.4826 * *mid};
+}
+
 HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block) {
   HeightNoise out;
   cv::Mat hu(h.size(), CV_32F, cv::Scalar(kNaN));
@@ -325,19 +334,11 @@ HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block) {
       }
       if (n >= 0.9 * block * block) means.push_back(static_cast<float>(sum / n));
     }
-  auto robustSigma = [](std::vector<float>& v) {
-    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    const float med = *mid;
-    for (float& x : v) x = std::fabs(x - med);
-    std::nth_element(v.begin(), mid, v.end());
-    return 1.4826 * *mid;
-  };
   if (px.size() < 100) return out;
-  out.sigma = robustSigma(px);
+  out.sigma = medianAndScale(px).second;
   out.blocks = static_cast<int>(means.size());
   if (means.size() < 20 || !(out.sigma > 0)) return out;
-  const double sb = robustSigma(means);
+  const double sb = medianAndScale(means).second;
   out.correlation_area = std::min(static_cast<double>(block) * block,
                                   std::max(1.0, static_cast<double>(block) * block * sb * sb / (out.sigma * out.sigma)));
   return out;

@@ -354,12 +354,9 @@ class PlaqueSearch {
     Surround out;
     out.pixels = static_cast<int>(v.size());
     if (v.size() < 30) return out;
-    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    out.offset = *mid;
-    for (float& x : v) x = std::fabs(x - static_cast<float>(out.offset));
-    std::nth_element(v.begin(), mid, v.end());
-    out.sigma = 1.4826 * *mid;
+    const auto ms = medianAndScale(v);
+    out.offset = ms.first;
+    out.sigma = ms.second;
     return out;
   }
 
@@ -397,12 +394,7 @@ class PlaqueSearch {
     std::vector<float> r;
     r.reserve(pts.size());
     for (const auto& q : pts) r.push_back(static_cast<float>(q.z() - basis(q).dot(c)));
-    auto mid = r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2);
-    std::nth_element(r.begin(), mid, r.end());
-    const float med = *mid;
-    for (float& v : r) v = std::fabs(v - med);
-    std::nth_element(r.begin(), mid, r.end());
-    return 1.4826 * *mid;
+    return medianAndScale(r).second;
   }
 
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */

@@ -11,10 +11,19 @@
  *     alternate (a) a robust (Tukey) least-squares fit of the reference model ("plane"; "quadric": an implicit
  *     quadric surface, Taubin fit, heights = distances to it, for a limb at any pose; "quadratic": height over
  *     the plane as a quadric of the in-plane coordinates) to the points not marked as plaque, and (b) marking
- *     as plaque the regions of at least a quarter of `min_area` that stand above the detection threshold
- *     (see 4; dilated by `exclusion_margin_px`), until the mask stops changing. (Excluding every noisy pixel
- *     above the threshold instead would bias the fit downwards.) "auto" alternates for the plane and the
- *     quadric and keeps the quadric only if it halves the robust scatter of the healthy skin's heights.
+ *     as plaque the regions of at least a quarter of `min_area` in the working band that stand above the
+ *     detection threshold (see 4; dilated by `exclusion_margin_px`), until the mask stops changing. (Excluding
+ *     every noisy pixel above the threshold instead would bias the fit downwards.) Only plaque-like regions are
+ *     left out of the fit: ones that rise above the skin around them (their median at least half the threshold
+ *     above that of a ring beyond the smoothing's reach) and are oval (at most 4:1 on the skin), or stand higher
+ *     than `max_height` (not skin). A long region is the reference bending away from the body (or a fold): left
+ *     out, the fit loses the skin that holds it and bends further (on a 2 MP rig, 2.7 % of the band excluded in
+ *     the first pass grew to 60 % in ten). "auto" alternates for the plane and the quadric and keeps the quadric
+ *     only if it halves the robust scatter of the healthy skin's heights.
+ *     The noise band: the RANSAC inlier distance, the fits' robust cut-off (Tukey, c = 4.685 x a third of it)
+ *     and the detection threshold's window are max(`ransac_threshold`, 3 x the surface's per-pixel noise), the
+ *     noise measured first on the depths about their own 8 px smoothing: a band made for the thesis' rig cut
+ *     a coarser rig's noise (0.3 mm per pixel on a 2 MP rig at 0.4 m) down to its middle.
  *  3. Height map: signed distance above the reference (m), smoothed with a Gaussian of `smoothing_px`
  *     (NaN-aware) for segmentation only; statistics use the unsmoothed heights.
  *  4. Plaques, searched within the working band: the pixels whose ray meets the reference where it faces both
@@ -84,7 +93,10 @@ struct IndurationOptions {
   double max_incidence_deg = 60.0;
   double smoothing_px = 2.0;         //!< Gaussian sigma for segmentation, px (0 = none): the smallest tried
   /** px: the segmentation smoothing grows from smoothing_px (sqrt 2 steps) until 3 robust sigma of the smoothed
-   *  healthy heights are below 1.5 min_height, up to this (noisy skin needs more than a speckle plate). */
+   *  healthy heights are below 1.5 min_height, up to this (noisy skin needs more than a speckle plate), and up to
+   *  the smoothing on the skin that keeps 3/4 of the height of the smallest plaque (a disc of min_area: 1.5 mm
+   *  for 20 mm^2, about the smoothing that gives that plaque the best signal to noise), whichever is smaller.
+   *  Wider smoothing spread plaques over their surroundings and merged them with the reference's departures. */
   double max_smoothing_px = 24.0;
   double edge_fraction = 0.5;        //!< plaque boundary at this fraction of its median height
   /** A raised region is a plaque only if at least this share of its footprint has a height; sparser ones (where
@@ -93,7 +105,9 @@ struct IndurationOptions {
   int exclusion_margin_px = 5;       //!< plaque mask dilation when fitting the reference
   int interior_margin_px = 8;        //!< heights are measured this far inside the plaque boundary (matching-window ramp)
   double sor_std_ratio = 3.0;        //!< statistical outlier removal threshold (std of neighbour distances)
-  double ransac_threshold = 0.2e-3;  //!< m: RANSAC plane inlier distance
+  /** m: the noise band's least width (RANSAC inlier distance, 3 x the fits' robust scale, the threshold's window);
+   *  3 x the surface's measured per-pixel noise where that is wider. */
+  double ransac_threshold = 0.2e-3;
   int fit_points = 200000;           //!< at most this many points (a regular subsample) in each fit
   int max_iterations = 10;           //!< reference / plaque-mask alternations
   double min_reference_fraction = 0.15;  //!< healthy skin must be at least this fraction of the known points

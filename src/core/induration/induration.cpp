@@ -69,6 +69,8 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   for (int y = 0; y < s.xyz.rows; ++y)
     for (int x = 0; x < s.xyz.cols; ++x) s.known_mask.at<uchar>(y, x) = known(s.xyz.at<cv::Vec3f>(y, x)) ? 255 : 0;
   res.known_points = s.known_points = cv::countNonZero(s.known_mask);
+  s.pixel_noise = pixelNoise(s.xyz, s.known_mask);
+  s.band = std::max(o.ransac_threshold, kNoiseBand * s.pixel_noise);
   if (res.known_points < 1000) {
     res.warnings.push_back("too few surface points (" + std::to_string(res.known_points) +
                            ") to fit a reference: check the dense matching (texture, overlap, working range)");
@@ -112,7 +114,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                            "towards the rig to measure there");
 
   // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
-  res.detection_threshold = detectionThreshold(hs, s.known_mask & ~best.plaque_mask & band, o.min_height, o.ransac_threshold);
+  res.detection_threshold = detectionThreshold(hs, s.known_mask & ~best.plaque_mask & band, o.min_height, s.band);
   if (res.detection_threshold > 2 * o.min_height)  // the noise, not min_height, sets the smallest plaque found
     res.warnings.push_back("the height noise of this view only lets plaques higher than " +
                            num(std::round(res.detection_threshold * 1e5) / 100) + " mm be found (3 robust sigma of the "

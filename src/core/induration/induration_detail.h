@@ -46,7 +46,16 @@ struct Surface {
   cv::Mat xyz;
   cv::Mat known_mask;
   int known_points = 0;
+  /** m: the band that holds the surface's noise, max(ransac_threshold, kNoiseBand x its per-pixel noise): the RANSAC
+   *  start's inlier distance, the reference fits' robust cut-off (a third of it) and the detection threshold's
+   *  window. A constant band made for one rig cuts the noise of a coarser one down to its middle: the fits then
+   *  follow whatever mode the start falls on, and the threshold measured inside it comes out too low. */
+  double band = 0;
+  double pixel_noise = 0;  //!< m: the surface's per-pixel noise (pixelNoise)
 };
+
+/** The band of `Surface::band` in units of the per-pixel noise: 3 sigma holds 99.7 % of it. */
+constexpr double kNoiseBand = 3.0;
 
 /** The reference fitted to one model by alternation, with its plaque mask and healthy-skin scale. */
 struct Alternation {
@@ -75,6 +84,12 @@ cv::Mat footprint(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Rec
 double detectionThreshold(const cv::Mat& hs, const cv::Mat& use, double min_height, double band);
 double adaptiveSmoothing(const cv::Mat& h, const cv::Mat& use, double start, double limit, double min_height, double band,
                          cv::Mat* smoothed);
+/** m: the widest segmentation smoothing (Gaussian sigma on the skin) that keeps 3/4 of the height at the centre of
+ *  the smallest plaque (a disc of min_area): 1 - exp(-r^2 / 2 sigma^2) = 3/4. Wider smoothing spreads plaques over
+ *  their surroundings and merges neighbours; min_area 20 mm^2 (r = 2.5 mm) gives 1.5 mm. */
+inline double maxSmoothing(double min_area) { return std::sqrt(min_area / M_PI) / std::sqrt(2 * std::log(4.0)); }
+/** m: a pixel's size on the reference (the square root of its footprint), the median over `use` (sampled). */
+double pixelSize(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Mat& use);
 double topHeight(const cv::Mat& mask, const cv::Mat& h, int margin, double noise_density, double* sigma);
 /** The healthy skin's height noise: its robust per-pixel sigma about the heights' slow trend, and its correlation
  *  area (px^2: block^2 times the variance of block x block means over the per-pixel variance, 1 ... block^2). */
@@ -84,11 +99,17 @@ struct HeightNoise {
   int blocks = 0;                                           //!< blocks it was measured on
 };
 HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block);
+double pixelNoise(const cv::Mat& xyz, const cv::Mat& known);
 cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre);
 cv::Mat workingBand(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre, double max_deg);
 cv::Mat holesOf(const cv::Mat& mask);
 Footprint measuredFootprint(const cv::Mat& mask, const cv::Rect& box, const cv::Mat& known, const cv::Mat& h, double edge, int max_gap);
 cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSurface& ref, double min_area);
+/** Plaques are oval (round to about 3:1): a region longer than this against its width is relief or a reference
+ *  that bends away from the body, not a plaque to leave out of the reference's fit. */
+constexpr double kMaxPlaqueAspect = 4.0;
+cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::Mat& xyz, const cv::Mat& known,
+                          double smoothing, double threshold, double max_height);
 
 // ---- induration_follow.cpp
 /** Above this share of the working band departing from the reference, the reference does not follow the skin. */

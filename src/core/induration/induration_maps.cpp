@@ -3,6 +3,7 @@
 // footprints and regions. See include/skin3d/induration/induration.h.
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -344,6 +345,44 @@ HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block) {
   return out;
 }
 
+double pixelSize(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Mat& use) {
+  std::vector<float> v;
+  const int step = std::max(8, static_cast<int>(std::sqrt(cv::countNonZero(use) / 400.0)));
+  for (int y = step / 2; y + 1 < use.rows; y += step)
+    for (int x = step / 2; x + 1 < use.cols; x += step)
+      if (use.at<uchar>(y, x)) {
+        const double a = footprint(ray, ref, cv::Rect(x, y, 1, 1)).at<double>(0, 0);
+        if (a > 0 && std::isfinite(a)) v.push_back(static_cast<float>(std::sqrt(a)));
+      }
+  if (v.empty()) return 0;
+  return medianAndScale(v).first;
+}
+
+/**
+ * The surface's per-pixel noise before any reference is fitted (m): the robust sigma of the depths about their
+ * own smoothing over kBlur px, along the rays (the depth's scatter is the matcher's, in every rig). The smoothing
+ * is wide against the matcher's correlation (a few px) and narrow against the body's curvature (a limb bends its
+ * depths by ~1/(2R) x (kBlur px)^2: 0.02 mm for R = 40 mm at 0.2 mm per px), so neither the shape nor the
+ * correlated part of the noise hides in it; the residual's scatter is within ~10 % of the noise's.
+ */
+double pixelNoise(const cv::Mat& xyz, const cv::Mat& known) {
+  constexpr double kBlur = 8.0;
+  std::vector<cv::Mat> ch;
+  cv::split(xyz, ch);
+  cv::Mat z(xyz.size(), CV_32F, cv::Scalar(kNaN));
+  ch[2].copyTo(z, known);
+  const cv::Mat r = z - smoothNaN(z, kBlur);
+  std::vector<float> v;
+  const int step = std::max(1, static_cast<int>(std::sqrt(cv::countNonZero(known) / 100000.0)));
+  for (int y = 0; y < r.rows; y += step) {
+    const float* p = r.ptr<float>(y);
+    for (int x = 0; x < r.cols; x += step)
+      if (std::isfinite(p[x])) v.push_back(p[x]);
+  }
+  if (v.size() < 100) return 0;
+  return medianAndScale(v).second;
+}
+
 /**
  * Incidence of the reference surface (deg, CV_32F): for every pixel whose ray meets the reference, the larger of
  * the angles its normal makes with the rays to the two cameras (the left at the origin, the right at
@@ -509,6 +548,60 @@ cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSur
   for (int y = 0; y < mask.rows; ++y)
     for (int x = 0; x < mask.cols; ++x)
       if (keep[lab.at<int>(y, x)]) out.at<uchar>(y, x) = 255;
+  return out;
+}
+
+cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::Mat& xyz, const cv::Mat& known,
+                          double smoothing, double threshold, double max_height) {
+  cv::Mat lab, stats, cents;
+  const int n = cv::connectedComponentsWithStats(regions, lab, stats, cents, 8, CV_32S);
+  const int gap = static_cast<int>(std::ceil(2 * smoothing)), width = std::max(gap, 8);
+  const int reach = gap + width;
+  const cv::Mat k_in = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * gap + 1, 2 * gap + 1));
+  const cv::Mat k_out = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * reach + 1, 2 * reach + 1));
+  cv::Mat out = cv::Mat::zeros(regions.size(), CV_8U);
+  for (int k = 1; k < n; ++k) {
+    const cv::Rect r(stats.at<int>(k, 0), stats.at<int>(k, 1), stats.at<int>(k, 2), stats.at<int>(k, 3));
+    const cv::Rect box = (r + cv::Size(2 * reach, 2 * reach) - cv::Point(reach, reach)) & cv::Rect(0, 0, regions.cols, regions.rows);
+    const cv::Mat mine = lab(box) == k;
+    cv::Mat near, far;
+    cv::dilate(mine, near, k_in);
+    cv::dilate(mine, far, k_out);
+    const cv::Mat ring = far & ~near & known(box) & ~regions(box);
+    std::vector<float> in, around;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d sq = Eigen::Matrix3d::Zero();
+    int points = 0;
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x) {
+        if (mine.at<uchar>(y, x) && known.at<uchar>(box.y + y, box.x + x)) {
+          const cv::Vec3f& p = xyz.at<cv::Vec3f>(box.y + y, box.x + x);
+          const Eigen::Vector3d q(p[0], p[1], p[2]);
+          sum += q;
+          sq += q * q.transpose();
+          ++points;
+        }
+        const float v = hs.at<float>(box.y + y, box.x + x);
+        if (!std::isfinite(v)) continue;
+        if (mine.at<uchar>(y, x)) in.push_back(v);
+        else if (ring.at<uchar>(y, x)) around.push_back(v);
+      }
+    bool rise = true;
+    double c = 0;
+    if (!in.empty() && around.size() >= 20) {
+      c = medianAndScale(in).first - medianAndScale(around).first;
+      rise = c >= 0.5 * threshold;
+    }
+    double aspect = 1;
+    if (points >= 10) {
+      const Eigen::Vector3d mean = sum / points;
+      const Eigen::Matrix3d cov = sq / points - mean * mean.transpose();
+      const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();  // ascending
+      aspect = std::sqrt(std::max(ev(2), 0.0) / std::max(ev(1), 1e-18));
+    }
+    const bool compact = aspect <= kMaxPlaqueAspect || c > max_height;
+    if (rise && compact) out(box).setTo(255, mine);
+  }
   return out;
 }
 

@@ -99,7 +99,8 @@ bool taubinQuadric(const std::vector<Eigen::Vector3d>& ys, const std::vector<dou
 }
 
 /** Robust (Tukey IRLS on geometric distances) fit of an implicit quadric to the points where `use` is set. */
-bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double max_scale, ReferenceSurface* ref) {
+bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double max_scale, ReferenceSurface* ref,
+                bool warm) {
   int total = 0;
   const std::vector<Eigen::Vector3d> pts = subsample(xyz, use, max_points, &total);
   if (pts.size() < 200) return false;
@@ -125,9 +126,12 @@ bool fitQuadric(const cv::Mat& xyz, const cv::Mat& use, int max_points, double m
     std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
     // first an unweighted fit (the start's residuals say nothing about a curved surface), then Tukey weights
     // with a cut-off that narrows to the plane's (a few hundred um) as the fit settles
-    const double cap = it <= 2 ? 10 * max_scale : max_scale / 3.0;
+    // (a warm start, from a quadric fitted to this surface before, has meaningful residuals: Tukey weights with
+    // the narrow cut-off from the first step, so that points far off it, a silhouette's mismatches or an object
+    // beside the skin, never pull the fit)
+    const double cap = it <= 2 && !warm ? 10 * max_scale : max_scale / 3.0;
     const double scale = std::min(std::max(1.4826 * a[a.size() / 2], 1e-7), cap);
-    for (std::size_t i = 0; i < pts.size(); ++i) w[i] = it == 0 ? 1.0 : tukey(r[i], 4.685 * scale);
+    for (std::size_t i = 0; i < pts.size(); ++i) w[i] = it == 0 && !warm ? 1.0 : tukey(r[i], 4.685 * scale);
     Vec10 theta;
     if (!taubinQuadric(ys, w, &theta)) return false;
     cur.coefficients = theta;
@@ -250,7 +254,7 @@ bool ransacStart(const Surface& s, ReferenceSurface* ref) {
     }
   Eigen::Vector4d plane;
   int inliers = 0;
-  if (!ransacPlane(sample, s.o.ransac_threshold, &plane, &inliers)) return false;
+  if (!ransacPlane(sample, s.band, &plane, &inliers)) return false;
   ref->normal = plane.head<3>();
   ref->d = plane(3);
   if (ref->d < 0) {
@@ -286,7 +290,7 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
   a.plaque_mask = cv::Mat::zeros(s.xyz.size(), CV_8U);
   const bool curved = model == "quadratic" || model == "quadric";
   auto fit = [&](const cv::Mat& use, double scale) {
-    return model == "quadric" ? fitQuadric(s.xyz, use, o.fit_points, scale, &a.ref)
+    return model == "quadric" ? fitQuadric(s.xyz, use, o.fit_points, scale, &a.ref, a.ref.model == "quadric")
                               : fitReference(s.xyz, use, model, o.fit_points, scale, &a.ref);
   };
   a.band = s.known_mask.clone();  // its own data: assigning an expression to a.band below writes into it
@@ -300,8 +304,8 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
     // the first pass measures against the RANSAC plane itself: a fit to every point would be pulled towards
     // large plaques; later passes fit the healthy skin only (a curved model first fits all points robustly
     // with a wider cut-off: a curved surface leaves a plane's band)
-    if (it == 0 && curved && !fit(use, 3 * o.ransac_threshold)) return a;
-    if (it > 0 && !fit(use, o.ransac_threshold)) return a;
+    if (it == 0 && curved && !fit(use, 3 * s.band)) return a;
+    if (it > 0 && !fit(use, s.band)) return a;
     const cv::Mat h = heights(s.xyz, a.ref);
     // the smoothing is chosen on the healthy skin: from the second pass on, once the plaques are masked
     cv::Mat hs;
@@ -309,13 +313,17 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
       a.smoothing = o.smoothing_px;
       hs = smoothNaN(h, a.smoothing);
     } else {
-      a.smoothing = adaptiveSmoothing(h, use, o.smoothing_px, o.max_smoothing_px, o.min_height, o.ransac_threshold, &hs);
+      // at most what keeps 3/4 of the smallest plaque's height (kMaxSmoothingOfSmallest), in px on this skin
+      const double pixel_m = pixelSize(s.cloud.ray, a.ref, use);
+      const double cap_px = pixel_m > 0 ? maxSmoothing(o.min_area) / pixel_m : o.max_smoothing_px;
+      const double limit = std::max(o.smoothing_px, std::min(o.max_smoothing_px, cap_px));
+      a.smoothing = adaptiveSmoothing(h, use, o.smoothing_px, limit, o.min_height, s.band, &hs);
     }
-    const double threshold = detectionThreshold(hs, use, o.min_height, o.ransac_threshold);
+    const double threshold = detectionThreshold(hs, use, o.min_height, s.band);
     // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
     // bias the next fit downwards, which raises more pixels above the threshold, and so on
     cv::Mat next;
-    cv::dilate(largeRegions(hs > threshold, s.cloud.ray, a.ref, o.min_area), next, dil);
+    cv::dilate(plaqueLikeRegions(largeRegions((hs > threshold) & a.band, s.cloud.ray, a.ref, o.min_area), hs, s.xyz, s.known_mask, a.smoothing, threshold, o.max_height), next, dil);
     const double changed = cv::countNonZero(next != a.plaque_mask) / static_cast<double>(s.known_points);
     a.plaque_mask = next;
     if (it > 0 && changed < 1e-4) break;

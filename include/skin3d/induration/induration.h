@@ -38,9 +38,9 @@
  *     unknown, the gap is bridged from both sides so the boundary falls in its middle), holes filled; largest
  *     cores first, the box around a core widened while the region reaches its border, and a core whose region
  *     reaches a plaque drawn already is that plaque's shoulder (no valley separates them), not a plaque. Ignored,
- *     with a warning: regions whose surroundings within the band are less than 80 % known (the edge of the
- *     measured surface, islands of mismatches), with less than `min_measured_share` of their footprint
- *     measured (scattered matches), or higher than `max_height`.
+ *     with a warning: regions whose surroundings within the band are less than 80 % known (the matcher's gaps of a
+ *     few px closed first; the edge of the measured surface, islands of mismatches), with less than
+ *     `min_measured_share` of their footprint measured (scattered matches), or higher than `max_height`.
  *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
  *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
  *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by

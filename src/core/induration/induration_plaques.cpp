@@ -300,7 +300,12 @@ class PlaqueSearch {
     cv::Mat full = cv::Mat::zeros(win.size(), CV_8U), d1, d2;
     cv::Mat known_pad = cv::Mat::zeros(win.size(), CV_8U), reach_pad(win.size(), CV_8U, cv::Scalar(255));
     full(cv::Rect(r2, r2, box.width, box.height)).setTo(255, mask);
-    s_.known_mask(in).copyTo(known_pad(in - win.tl()));
+    // the matcher's scattered gaps (a few px, where its fit and the semi-global answer disagree on weak texture)
+    // are closed first: they are skin that was seen, and on a coarse rig they took a quarter of a plaque's ring;
+    // the edge of the measured surface is a gap wider than the closing
+    cv::Mat known_closed;
+    cv::morphologyEx(s_.known_mask(in), known_closed, cv::MORPH_CLOSE, join_);
+    known_closed.copyTo(known_pad(in - win.tl()));
     reach_(in).copyTo(reach_pad(in - win.tl()));
     cv::dilate(full, d1, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r1 + 1, 2 * r1 + 1)));
     cv::dilate(full, d2, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r2 + 1, 2 * r2 + 1)));

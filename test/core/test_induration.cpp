@@ -308,6 +308,32 @@ TEST(Induration, TheTopsStatedUncertaintyIsItsSpreadOverNoiseDraws) {
   }
 }
 
+// A coarse rig: heights scatter 0.3 mm per pixel (correlated over a few px, like a matcher's), 1.5 times the thesis
+// rig's fixed 0.2 mm band. The reference's fits, RANSAC start and detection threshold must work in a band that holds
+// this noise (measured, not assumed), the alternation must not run away, and the two plaques (0.8 and 1.1 mm, 12 mm
+// across) must be found with their tops within 3 stated sigma and nothing else called a plaque.
+TEST(Induration, ANoisyRigsReferenceHoldsAndItsPlaquesAreFound) {
+  for (const std::uint64_t seed : {3u, 4u, 5u}) {
+    Scene s;
+    s.seed = seed;
+    s.curvature = 1.0 / 0.3;
+    s.noise = 0.3e-3;
+    s.noise_blur_px = 2.0;
+    s.rounds = {{-0.02, 0.01, 0.006, 1.1e-3, 1.0e-3, 0.0}, {0.025, -0.01, 0.006, 0.8e-3, 1.0e-3, 0.0}};
+    const auto r = measureInduration(s.cloud(), IndurationOptions());
+    ASSERT_TRUE(r.reference_ok) << "seed " << seed;
+    EXPECT_TRUE(r.reference_follows) << "seed " << seed << ": unfollowed share " << r.unfollowed_share;
+    EXPECT_NEAR(r.height_noise, 0.3e-3, 0.1e-3) << "seed " << seed;
+    ASSERT_EQ(r.plaques.size(), 2u) << "seed " << seed;
+    for (const auto& p : r.plaques) {
+      const double truth = p.centroid.x() < 0.0 ? 1.1e-3 : 0.8e-3;  // the 1.1 mm plaque is left of the axis
+      std::printf("seed %d: top %.4f +- %.4f mm (truth %.1f)\n", static_cast<int>(seed), p.top_height * 1e3,
+                  p.top_height_sigma * 1e3, truth * 1e3);
+      EXPECT_LT(std::fabs(p.top_height - truth), 3 * p.top_height_sigma) << "seed " << seed;
+    }
+  }
+}
+
 TEST(Induration, ScatteredMatchesAreNotAPlaque) {
   // the same 0.3 mm plaque with 30 % and with 70 % of its pixels unknown (random, seeded): the first is a
   // partly measured plaque, the second is under min_measured_share and only named in a warning

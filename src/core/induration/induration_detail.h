@@ -99,6 +99,7 @@ struct HeightNoise {
   int blocks = 0;                                           //!< blocks it was measured on
 };
 HeightNoise heightNoise(const cv::Mat& h, const cv::Mat& use, int block);
+/** m: the surface's per-pixel noise before any reference: the robust sigma of the depths about their 8 px smoothing. */
 double pixelNoise(const cv::Mat& xyz, const cv::Mat& known);
 cv::Mat incidenceMap(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre);
 cv::Mat workingBand(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Vec3d& right_centre, double max_deg);
@@ -108,6 +109,10 @@ cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSur
 /** Plaques are oval (round to about 3:1): a region longer than this against its width is relief or a reference
  *  that bends away from the body, not a plaque to leave out of the reference's fit. */
 constexpr double kMaxPlaqueAspect = 4.0;
+/** The regions of `regions` (8-connected) that look like plaques to leave out of the reference's fit: each rises
+ *  above the skin around it (the median of its smoothed heights `hs` at least half `threshold` above that of a ring
+ *  of known pixels beyond 2 `smoothing` px, at least 8 px wide) and is oval (the two largest extents of its points
+ *  `xyz` at most kMaxPlaqueAspect : 1), or stands more than `max_height` above its ring (not skin). */
 cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::Mat& xyz, const cv::Mat& known,
                           double smoothing, double threshold, double max_height);
 

@@ -313,7 +313,7 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
       a.smoothing = o.smoothing_px;
       hs = smoothNaN(h, a.smoothing);
     } else {
-      // at most what keeps 3/4 of the smallest plaque's height (kMaxSmoothingOfSmallest), in px on this skin
+      // at most what keeps 3/4 of the smallest plaque's height (maxSmoothing), in px on this skin
       const double pixel_m = pixelSize(s.cloud.ray, a.ref, use);
       const double cap_px = pixel_m > 0 ? maxSmoothing(o.min_area) / pixel_m : o.max_smoothing_px;
       const double limit = std::max(o.smoothing_px, std::min(o.max_smoothing_px, cap_px));
@@ -323,7 +323,10 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
     // only regions of plaque size are excluded: excluding every pixel of the noise's upper tail would
     // bias the next fit downwards, which raises more pixels above the threshold, and so on
     cv::Mat next;
-    cv::dilate(plaqueLikeRegions(largeRegions((hs > threshold) & a.band, s.cloud.ray, a.ref, o.min_area), hs, s.xyz, s.known_mask, a.smoothing, threshold, o.max_height), next, dil);
+    // (and only plaque-like ones: a long strip is the reference bending away from the body, and leaving it out
+    // takes away the skin that holds the fit)
+    const cv::Mat raised = largeRegions((hs > threshold) & a.band, s.cloud.ray, a.ref, o.min_area);
+    cv::dilate(plaqueLikeRegions(raised, hs, s.xyz, s.known_mask, a.smoothing, threshold, o.max_height), next, dil);
     const double changed = cv::countNonZero(next != a.plaque_mask) / static_cast<double>(s.known_points);
     a.plaque_mask = next;
     if (it > 0 && changed < 1e-4) break;

@@ -69,13 +69,14 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   for (int y = 0; y < s.xyz.rows; ++y)
     for (int x = 0; x < s.xyz.cols; ++x) s.known_mask.at<uchar>(y, x) = known(s.xyz.at<cv::Vec3f>(y, x)) ? 255 : 0;
   res.known_points = s.known_points = cv::countNonZero(s.known_mask);
-  s.pixel_noise = pixelNoise(s.xyz, s.known_mask);
-  s.band = std::max(o.ransac_threshold, kNoiseBand * s.pixel_noise);
   if (res.known_points < 1000) {
     res.warnings.push_back("too few surface points (" + std::to_string(res.known_points) +
                            ") to fit a reference: check the dense matching (texture, overlap, working range)");
     return res;
   }
+
+  s.pixel_noise = pixelNoise(s.xyz, s.known_mask);
+  s.band = std::max(o.ransac_threshold, kNoiseBand * s.pixel_noise);
 
   // ---- the reference: a RANSAC plane to start, then alternation (robust fit on the healthy points, plaque
   // mask from the heights) for the plane and the quadric

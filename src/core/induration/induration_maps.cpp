@@ -367,10 +367,9 @@ double pixelSize(const cv::Mat& ray, const ReferenceSurface& ref, const cv::Mat&
  */
 double pixelNoise(const cv::Mat& xyz, const cv::Mat& known) {
   constexpr double kBlur = 8.0;
-  std::vector<cv::Mat> ch;
-  cv::split(xyz, ch);
-  cv::Mat z(xyz.size(), CV_32F, cv::Scalar(kNaN));
-  ch[2].copyTo(z, known);
+  cv::Mat depth, z(xyz.size(), CV_32F, cv::Scalar(kNaN));
+  cv::extractChannel(xyz, depth, 2);
+  depth.copyTo(z, known);
   const cv::Mat r = z - smoothNaN(z, kBlur);
   std::vector<float> v;
   const int step = std::max(1, static_cast<int>(std::sqrt(cv::countNonZero(known) / 100000.0)));

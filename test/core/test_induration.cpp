@@ -334,6 +334,52 @@ TEST(Induration, ANoisyRigsReferenceHoldsAndItsPlaquesAreFound) {
   }
 }
 
+// A large, low plaque on noisy skin (0.19 mm per pixel, correlated over 1.5 px): the first scale's smoothing is
+// bounded by the smallest plaque's size (1.5 mm on the skin, about 4 px here), which leaves a threshold above the
+// plaque (0.15 mm, 20 mm across), so at best its noise peaks are found. The wider scale must find all of it: its top
+// within 3 stated sigma, at least half its area (a noise peak covers a fifth), the small tall plaque beside it as at
+// the first scale, and no plaque on the healthy skin of the same noise.
+TEST(Induration, ALargeLowPlaqueUnderTheFirstScalesThresholdIsFoundAtTheWiderScale) {
+  const Round low{-0.015, 0.005, 0.010, 0.15e-3, 1.0e-3, 0.0}, tall{0.03, -0.01, 0.004, 0.8e-3, 0.5e-3, 0.0};
+  for (const std::uint64_t seed : {3u, 4u, 5u}) {
+    for (const bool plaques : {true, false}) {
+      Scene s;
+      s.seed = seed;
+      s.curvature = 1.0 / 0.3;
+      s.noise = 0.19e-3;
+      s.noise_blur_px = 1.5;
+      if (plaques) s.rounds = {low, tall};
+      const auto r = measureInduration(s.cloud(), IndurationOptions());
+      ASSERT_TRUE(r.reference_ok) << "seed " << seed;
+      EXPECT_TRUE(r.reference_follows) << "seed " << seed;
+      // the scene is what it is meant to be: the low plaque under the first scale's threshold, above the wider one's
+      ASSERT_GT(r.detection_threshold, low.height) << "seed " << seed;
+      ASSERT_GT(r.wide_smoothing_px, r.smoothing_px) << "seed " << seed;
+      ASSERT_LT(r.wide_detection_threshold, 0.75 * low.height) << "seed " << seed;
+      std::printf("seed %d (%s): first scale %.1f px, threshold %.3f mm; wider %.1f px, %.3f mm, over %.0f mm^2\n",
+                  static_cast<int>(seed), plaques ? "plaques" : "healthy", r.smoothing_px, r.detection_threshold * 1e3,
+                  r.wide_smoothing_px, r.wide_detection_threshold * 1e3, r.wide_min_area * 1e6);
+      for (const auto& p : r.plaques)
+        std::printf("  plaque %d: %.1f mm^2, top %.4f +- %.4f mm\n", p.id, p.area * 1e6, p.top_height * 1e3,
+                    p.top_height_sigma * 1e3);
+      if (!plaques) {
+        EXPECT_TRUE(r.plaques.empty()) << "seed " << seed << ": a plaque on healthy skin";
+        continue;
+      }
+      ASSERT_EQ(r.plaques.size(), 2u) << "seed " << seed;
+      for (const Round& t : {low, tall}) {
+        const Eigen::Vector3d c = s.origin + t.u * s.e1 + t.v * s.e2;
+        const induration::Plaque* best = nullptr;
+        for (const auto& p : r.plaques)
+          if ((p.centroid - c).norm() < 3e-3) best = &p;
+        ASSERT_NE(best, nullptr) << "seed " << seed << ": the " << t.height * 1e3 << " mm plaque is not found";
+        EXPECT_LT(std::fabs(best->top_height - t.height), 3 * best->top_height_sigma) << "seed " << seed;
+        EXPECT_GT(best->area, 0.5 * M_PI * t.radius * t.radius) << "seed " << seed << ": " << t.height * 1e3 << " mm plaque";
+      }
+    }
+  }
+}
+
 TEST(Induration, ScatteredMatchesAreNotAPlaque) {
   // the same 0.3 mm plaque with 30 % and with 70 % of its pixels unknown (random, seeded): the first is a
   // partly measured plaque, the second is under min_measured_share and only named in a warning

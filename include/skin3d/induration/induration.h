@@ -96,7 +96,11 @@ struct IndurationOptions {
    *  healthy heights are below 1.5 min_height, up to this (noisy skin needs more than a speckle plate), and up to
    *  the smoothing on the skin that keeps 3/4 of the height of the smallest plaque (a disc of min_area: 1.5 mm
    *  for 20 mm^2, about the smoothing that gives that plaque the best signal to noise), whichever is smaller.
-   *  Wider smoothing spread plaques over their surroundings and merged them with the reference's departures. */
+   *  Wider smoothing spread plaques over their surroundings and merged them with the reference's departures.
+   *  The search then runs again at a wider scale, for large plaques lower than that threshold: the smoothing grows
+   *  on from there the same way, up to this, and a plaque it adds must be wider than that smoothing (a disc of
+   *  radius sigma: the noise's excursions above the threshold cover 0.4 of it on average), oval, rising above the
+   *  skin around it and measured over 80 % of its footprint. */
   double max_smoothing_px = 24.0;
   double edge_fraction = 0.5;        //!< plaque boundary at this fraction of its median height
   /** A raised region is a plaque only if at least this share of its footprint has a height; sparser ones (where
@@ -179,6 +183,10 @@ struct IndurationResult {
   double smoothing_px = 0;         //!< px: the segmentation smoothing chosen (see max_smoothing_px)
   double band_fraction = 1;        //!< share of the known points within the working band (max_incidence_deg)
   double detection_threshold = 0;  //!< m: max(min_height, 3 robust sigma of the smoothed healthy-skin heights)
+  /** The wider scale's smoothing (px) and detection threshold (m), and the smallest plaque it can add (m^2, a
+   *  disc of radius sigma on the skin); all 0 when the search ran at one scale (the first scale's threshold
+   *  is min_height already, or max_smoothing_px leaves no wider one). */
+  double wide_smoothing_px = 0, wide_detection_threshold = 0, wide_min_area = 0;
   /** Whether the reference follows the skin: false when more than 2 % of the working band (outside the plaques) lies
    *  beyond the detection threshold above or below it in regions of at least min_area; no plaque can be measured
    *  there, and a warning names the regions. */

@@ -115,20 +115,49 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                            "towards the rig to measure there");
 
   // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
-  res.detection_threshold = detectionThreshold(hs, s.known_mask & ~best.plaque_mask & band, o.min_height, s.band);
+  const cv::Mat healthy = s.known_mask & ~best.plaque_mask & band;
+  res.detection_threshold = detectionThreshold(hs, healthy, o.min_height, s.band);
+  std::vector<SearchScale> scales{{hs, res.detection_threshold, best.smoothing, 0.0, false}};
+  // ---- a wider scale for large plaques under that threshold (the first scale's smoothing is bounded by the
+  // smallest plaque's size): the smoothing grows on, as far as max_smoothing_px, until the noise allows
+  // min_height again; what it adds must be wider than its noise's bumps, oval and rise above its surroundings
+  // (only where the noise keeps the first scale from the 2 min_height, 0.1 mm, a plaque must have to count)
+  if (res.detection_threshold > 2 * o.min_height && o.max_smoothing_px >= 1.5 * best.smoothing) {
+    cv::Mat unused;
+    const double wide = adaptiveSmoothing(res.height_map, healthy, 1.5 * best.smoothing, o.max_smoothing_px, o.min_height,
+                                          s.band, &unused);
+    const cv::Mat hw = smoothFilled(res.height_map, wide, o.interior_margin_px);
+    const double tw = detectionThreshold(hw, healthy, o.min_height, s.band);
+    if (tw < 0.8 * res.detection_threshold) {
+      // wider than the smoothing itself (a disc of radius sigma): the noise's excursions above 3 sigma of its
+      // smoothed heights cover 0.4 of that on average (4 pi sigma^2 / 9, Adler's mean excursion area), 90 % of them
+      // less than 0.7-0.9 (simulated: white noise blurred by 1.5 px, smoothed by 8, 12 and 24 px)
+      const double r = wide;
+      scales.push_back({hw, tw, wide, M_PI * r * r, true});
+      const double pixel_m = pixelSize(cloud.ray, res.reference, healthy);
+      res.wide_smoothing_px = wide;
+      res.wide_detection_threshold = tw;
+      res.wide_min_area = M_PI * r * r * pixel_m * pixel_m;
+    }
+  }
   if (res.detection_threshold > 2 * o.min_height)  // the noise, not min_height, sets the smallest plaque found
     res.warnings.push_back("the height noise of this view only lets plaques higher than " +
                            num(std::round(res.detection_threshold * 1e5) / 100) + " mm be found (3 robust sigma of the "
                            "healthy skin's heights after " + num(best.smoothing) + " px of smoothing; min_height is " +
-                           num(o.min_height * 1e3) + " mm): lower ones cannot be told from the noise (a nearer working "
+                           num(o.min_height * 1e3) + " mm)" +
+                           (res.wide_smoothing_px > 0
+                                ? ", and plaques of more than " + num(std::round(res.wide_min_area * 1e6)) + " mm^2 higher than " +
+                                      num(std::round(res.wide_detection_threshold * 1e5) / 100) + " mm (after " +
+                                      num(std::round(res.wide_smoothing_px * 10) / 10) + " px)"
+                                : std::string()) +
+                           ": lower ones cannot be told from the noise (a nearer working "
                            "distance, a longer baseline or a finer camera lowers it)");
   // the height noise the plaques' uncertainties rest on, in blocks of 4 matcher ramps (the noise's correlation
   // reaches about one matching window)
-  const HeightNoise noise = heightNoise(res.height_map, s.known_mask & ~best.plaque_mask & band,
-                                        std::max(8, 4 * o.interior_margin_px));
+  const HeightNoise noise = heightNoise(res.height_map, healthy, std::max(8, 4 * o.interior_margin_px));
   res.height_noise = noise.sigma;
   res.noise_correlation_px2 = noise.correlation_area;
-  findPlaques(s, hs, band, reach, res.detection_threshold, best.smoothing, noise, res);
+  findPlaques(s, scales, band, reach, noise, res);
   checkReferenceFollows(s, hs, band, res);
   if (res.plaques.empty())
     res.warnings.push_back(res.reference_follows

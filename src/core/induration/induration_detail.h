@@ -109,6 +109,9 @@ cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSur
 /** Plaques are oval (round to about 3:1): a region longer than this against its width is relief or a reference
  *  that bends away from the body, not a plaque to leave out of the reference's fit. */
 constexpr double kMaxPlaqueAspect = 4.0;
+/** A point set's length over its width: the square root of the largest over the middle eigenvalue of the covariance
+ *  of its `points` points (`sum`: their sum, `sq`: the sum of their outer products); 1 under 10 points. */
+double aspectOf(const Eigen::Vector3d& sum, const Eigen::Matrix3d& sq, int points);
 /** The regions of `regions` (8-connected) that look like plaques to leave out of the reference's fit: each rises
  *  above the skin around it (the median of its smoothed heights `hs` at least half `threshold` above that of a ring
  *  of known pixels beyond 2 `smoothing` px, at least 8 px wide) and is oval (the two largest extents of its points
@@ -132,9 +135,18 @@ Alternation chooseReference(const Surface& s, const ReferenceSurface& start,
                             std::vector<std::pair<std::string, double>>* candidates);
 
 // ---- induration_plaques.cpp
-/** The plaques (PlaqueSearch): into res.plaques, res.labels and res.warnings. */
-void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-                 double smoothing, const HeightNoise& noise, IndurationResult& res);
+/** One scale of the plaque search: the heights smoothed by `smoothing` px, the detection threshold on them (m), and
+ *  the fewest footprint pixels a plaque found at this scale must cover (0: min_area alone). */
+struct SearchScale {
+  cv::Mat hs;
+  double threshold = 0, smoothing = 0;
+  double min_pixels = 0;
+  bool plaque_like_only = false;  //!< keep only cores that rise above a ring and are oval (plaqueLikeRegions)
+};
+/** The plaques (PlaqueSearch): into res.plaques, res.labels and res.warnings. The scales are searched in order: a
+ *  later (wider) scale adds the plaques the earlier ones did not find (large, low plaques under their threshold). */
+void findPlaques(const Surface& s, const std::vector<SearchScale>& scales, const cv::Mat& band, const cv::Mat& reach,
+                 const HeightNoise& noise, IndurationResult& res);
 
 }  // namespace induration_detail
 }  // namespace induration

@@ -392,6 +392,10 @@ void writeInduration(const std::string& path, const std::vector<FrameRecord>& fr
     y << YAML::Key << "smoothing_px" << YAML::Value << r.smoothing_px;
     y << YAML::Key << "band_fraction" << YAML::Value << r.band_fraction;
     y << YAML::Key << "detection_threshold_mm" << YAML::Value << kMm * r.detection_threshold;
+    if (r.wide_smoothing_px > 0)
+      y << YAML::Key << "wide_scale" << YAML::Value << YAML::BeginMap << YAML::Key << "smoothing_px" << YAML::Value
+        << r.wide_smoothing_px << YAML::Key << "detection_threshold_mm" << YAML::Value << kMm * r.wide_detection_threshold
+        << YAML::Key << "min_area_mm2" << YAML::Value << 1e6 * r.wide_min_area << YAML::EndMap;
     emitReference(y, r);
     y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
     for (const auto& w : r.warnings) y << w;

@@ -550,6 +550,14 @@ cv::Mat largeRegions(const cv::Mat& mask, const cv::Mat& ray, const ReferenceSur
   return out;
 }
 
+double aspectOf(const Eigen::Vector3d& sum, const Eigen::Matrix3d& sq, int points) {
+  if (points < 10) return 1;
+  const Eigen::Vector3d mean = sum / points;
+  const Eigen::Matrix3d cov = sq / points - mean * mean.transpose();
+  const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();  // ascending
+  return std::sqrt(std::max(ev(2), 0.0) / std::max(ev(1), 1e-18));
+}
+
 cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::Mat& xyz, const cv::Mat& known,
                           double smoothing, double threshold, double max_height) {
   cv::Mat lab, stats, cents;
@@ -591,13 +599,7 @@ cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::M
       c = medianAndScale(in).first - medianAndScale(around).first;
       rise = c >= 0.5 * threshold;
     }
-    double aspect = 1;
-    if (points >= 10) {
-      const Eigen::Vector3d mean = sum / points;
-      const Eigen::Matrix3d cov = sq / points - mean * mean.transpose();
-      const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();  // ascending
-      aspect = std::sqrt(std::max(ev(2), 0.0) / std::max(ev(1), 1e-18));
-    }
+    const double aspect = aspectOf(sum, sq, points);
     const bool compact = aspect <= kMaxPlaqueAspect || c > max_height;
     if (rise && compact) out(box).setTo(255, mine);
   }

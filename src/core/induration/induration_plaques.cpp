@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 
@@ -27,12 +28,17 @@ constexpr double kOpenOutline = 0.1;
 constexpr double kHalfRamp = 1.0e-3;
 /** m: the healthy-skin ring around a plaque is at least this wide (its heights' median and scatter). */
 constexpr double kRingWidth = 1.0e-3;
+/** A plaque found only at the wider scale must have a height over this share of its footprint: its smoothed heights
+ *  were filled across gaps and averaged over several mm, and over a sparse region they say little (the at-edge
+ *  rule asks the same of a plaque's surroundings). */
+constexpr double kWideMeasuredShare = 0.8;
 
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
   double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   std::vector<float> hk;  // interior heights
+  double aspect = 1;      // length over width of its measured points (aspectOf)
   int px = 0, nc = 0;     // footprint pixels, pixels with a height
 };
 
@@ -47,32 +53,42 @@ std::string atPixel(const cv::Rect& box) {
  */
 class PlaqueSearch {
  public:
-  PlaqueSearch(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-               double smoothing, const HeightNoise& noise, IndurationResult& res)
-      : s_(s), o_(s.o), hs_(hs), reach_(reach), threshold_(threshold), smoothing_(smoothing), noise_(noise), res_(res) {
+  PlaqueSearch(const Surface& s, const cv::Mat& band, const cv::Mat& reach, const HeightNoise& noise, IndurationResult& res)
+      : s_(s), o_(s.o), band_(band), reach_(reach), noise_(noise), res_(res) {
     // A plaque cut by a narrow unknown or low strip (a step edge the matcher could not follow, a line of noise)
     // is one plaque: regions closer than about one interior margin are joined (closing) before labelling.
     const int jr = (o_.interior_margin_px + 1) / 2;
     join_ = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * jr + 1, 2 * jr + 1));
     off_band_ = s.known_mask & ~band;  // measured, but seen too obliquely
-    cv::Mat above = (hs > threshold) & band, cents;
-    if (o_.interior_margin_px > 0) {
-      cv::morphologyEx(above, above, cv::MORPH_CLOSE, join_);
-      above.setTo(0, off_band_);
-    }
-    n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
     final_labels_ = cv::Mat(s.xyz.size(), CV_32S, cv::Scalar(0));
   }
 
-  /** Draws every core, largest first: a plaque whose core the matcher cut in two (an occlusion shadow across it)
-   *  is drawn from its larger piece, and the smaller piece, already inside it, is skipped. Then the ids by
-   *  decreasing area, the labels, and the warnings of the regions ignored. */
-  void run() {
-    std::vector<int> cores(std::max(0, n_ - 1));
-    std::iota(cores.begin(), cores.end(), 1);
-    std::stable_sort(cores.begin(), cores.end(),
-                     [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
-    for (const int k : cores) drawCore(k);
+  /** At each scale, draws every core, largest first: a plaque whose core the matcher cut in two (an occlusion
+   *  shadow across it) is drawn from its larger piece, and the smaller piece, already inside it, is skipped; a core
+   *  mostly inside a plaque of an earlier scale is that plaque. Then the ids by decreasing area, the labels, and
+   *  the warnings of the regions ignored. */
+  void run(const std::vector<SearchScale>& scales) {
+    for (std::size_t i = 0; i < scales.size(); ++i) {
+      const SearchScale& sc = scales[i];
+      hs_ = sc.hs;
+      threshold_ = sc.threshold;
+      smoothing_ = sc.smoothing;
+      min_pixels_ = sc.min_pixels;
+      if (i == 0) first_threshold_ = sc.threshold;
+      first_scale_ = i == 0;
+      cv::Mat above = (hs_ > threshold_) & band_, cents;
+      if (o_.interior_margin_px > 0) {
+        cv::morphologyEx(above, above, cv::MORPH_CLOSE, join_);
+        above.setTo(0, off_band_);
+      }
+      if (sc.plaque_like_only) above = plaqueLikeRegions(above, hs_, s_.xyz, s_.known_mask, smoothing_, threshold_, o_.max_height);
+      n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
+      std::vector<int> cores(std::max(0, n_ - 1));
+      std::iota(cores.begin(), cores.end(), 1);
+      std::stable_sort(cores.begin(), cores.end(),
+                       [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
+      for (const int k : cores) drawCore(k);
+    }
     renumberByArea();
     warnIgnored();
   }
@@ -84,7 +100,8 @@ class PlaqueSearch {
                       stats_.at<int>(k, cv::CC_STAT_WIDTH), stats_.at<int>(k, cv::CC_STAT_HEIGHT));
     if (takenAlready(k, bb)) return;  // part of a plaque drawn already
     double edge = 0, ceiling = 0;
-    if (!coreLevels(k, bb, &edge, &ceiling)) return;
+    bool limited = false;
+    if (!coreLevels(k, bb, &edge, &ceiling, &limited)) return;
     cv::Rect box;
     cv::Mat mask;
     growRegion(k, bb, edge, ceiling, &box, &mask);
@@ -94,31 +111,52 @@ class PlaqueSearch {
     // footprints on the reference's tangent plane at the region (the plane itself for the plane model)
     const ReferenceSurface local = localPlane(box, mask);
     const cv::Mat A = footprint(s_.cloud.ray, local, box);
+    // a few pixels of a neighbour are left to it; a plaque of an earlier scale drawn at the threshold (its outline
+    // the noise's, not its own) that this region covers by half or more is replaced by it
+    std::map<int, int> covered;
     for (int y = 0; y < box.height; ++y)
-      for (int x = 0; x < box.width; ++x)
-        if (final_labels_.at<int>(y + box.y, x + box.x) != 0) mask.at<uchar>(y, x) = 0;  // a few pixels of a neighbour
+      for (int x = 0; x < box.width; ++x) {
+        const int l = final_labels_.at<int>(y + box.y, x + box.x);
+        if (taken(l)) mask.at<uchar>(y, x) = 0;
+        else if (l != 0 && mask.at<uchar>(y, x)) ++covered[l];
+      }
+    std::vector<int> replace;
+    for (const auto& c : covered)
+      if (2 * c.second >= plaques_[c.first - 1].pixels) replace.push_back(c.first);
+    for (int y = 0; y < box.height; ++y)
+      for (int x = 0; x < box.width; ++x) {
+        const int l = final_labels_.at<int>(y + box.y, x + box.x);
+        if (l != 0 && mask.at<uchar>(y, x) && std::find(replace.begin(), replace.end(), l) == replace.end()) mask.at<uchar>(y, x) = 0;
+      }
     // area, share measured, volume, label and the top's profile over the footprint the measurements support
     // (mean, max, std: the region's interior, as before)
     const Footprint foot =
         measuredFootprint(mask, box, s_.known_mask, res_.height_map, edge, 4 * std::max(1, o_.interior_margin_px));
     PlaqueSums sums = accumulate(box, mask, foot.pixels, A, local);
-    if (sums.area < o_.min_area || sums.hk.size() < 10) return;
+    if (sums.area < o_.min_area || sums.px < min_pixels_ || sums.hk.size() < 10) return;
     if (atEdgeOrTooHigh(box, mask, sums)) return;
     // Drawn on the smoothed heights, a region must also stand above the noise in its own measured heights: an
     // interior whose mean is below the detection threshold is the smoothed noise's upper tail (or heights filled
     // across a gap), not a plaque the instrument can tell from the skin.
     if (sums.sh / sums.hk.size() < threshold_) {
-      low_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", mean " +
+      if (first_scale_) low_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", mean " +
                                      num(std::round(sums.sh / sums.hk.size() * 1e5) / 100) + " mm");
       return;
     }
+    // a plaque only the wider scale finds was drawn on heights smoothed (and filled) over several mm: it must be
+    // oval like a plaque, not a strip of the reference's departure along the band, and measured over most of it
+    if (!first_scale_ && (sums.aspect > kMaxPlaqueAspect || sums.nc < kWideMeasuredShare * sums.px)) return;
     if (sums.nc < o_.min_measured_share * sums.px) {
-      sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+      if (first_scale_) sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
                                         num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
       return;
     }
-    addPlaque(box, foot, sums);
+    addPlaque(box, foot, sums, limited, replace);
   }
+
+  /** Whether plaque label l (0: none) holds its pixels against the scale being searched: every plaque does at the
+   *  first scale; at a later one, only those not drawn at their scale's threshold. */
+  bool taken(int l) const { return l != 0 && (first_scale_ || !tentative_[l - 1]); }
 
   /** True when at least half of core k lies in a plaque drawn already. */
   bool takenAlready(int k, const cv::Rect& bb) const {
@@ -127,14 +165,14 @@ class PlaqueSearch {
       for (int x = bb.x; x < bb.x + bb.width; ++x)
         if (lab_.at<int>(y, x) == k) {
           ++in_core;
-          taken += final_labels_.at<int>(y, x) != 0;
+          taken += this->taken(final_labels_.at<int>(y, x));
         }
     return 2 * taken >= in_core;
   }
 
   /** The core's edge level (edge_fraction of its median height, at least the threshold) and its ceiling; false
    *  when the core has under 10 heights. */
-  bool coreLevels(int k, const cv::Rect& bb, double* edge, double* ceiling) const {
+  bool coreLevels(int k, const cv::Rect& bb, double* edge, double* ceiling, bool* limited) const {
     std::vector<float> hv;
     for (int y = bb.y; y < bb.y + bb.height; ++y)
       for (int x = bb.x; x < bb.x + bb.width; ++x)
@@ -155,7 +193,7 @@ class PlaqueSearch {
       const double d0 = std::min(2 * smoothing_, 0.5 * dmax);
       for (int y = 0; y < pad.height; ++y)
         for (int x = 0; x < pad.width; ++x) {
-          const float h = res_.height_map.at<float>(y + pad.y, x + pad.x);
+          const float h = (first_scale_ ? res_.height_map : hs_).at<float>(y + pad.y, x + pad.x);
           if (dist.at<float>(y, x) >= d0 && !std::isnan(h)) inner.push_back(h);
         }
     }
@@ -163,6 +201,7 @@ class PlaqueSearch {
     std::nth_element(mv.begin(), mv.begin() + mv.size() / 2, mv.end());
     const double median = mv[mv.size() / 2];
     *edge = std::max(threshold_, o_.edge_fraction * median);
+    *limited = o_.edge_fraction * median < threshold_;  // outlined by the threshold, not at its own half height
     // The core holds the plaque's top: a pixel of its region far above the core's highest is another bump (a
     // stripe of mismatches along the measured surface's edge, a neighbouring higher plaque), not this plaque.
     std::nth_element(hv.begin(), hv.begin() + static_cast<std::ptrdiff_t>(0.99 * (hv.size() - 1)), hv.end());
@@ -219,7 +258,7 @@ class PlaqueSearch {
     int overlap = 0;
     for (int y = 0; y < box.height && overlap < 10; ++y)
       for (int x = 0; x < box.width; ++x)
-        if (loose.at<uchar>(y, x) && final_labels_.at<int>(y + box.y, x + box.x) != 0) ++overlap;
+        if (loose.at<uchar>(y, x) && taken(final_labels_.at<int>(y + box.y, x + box.x))) ++overlap;
     return overlap >= 10;
   }
 
@@ -259,6 +298,7 @@ class PlaqueSearch {
       interior = mask;
     }
     PlaqueSums t;
+    Eigen::Matrix3d sq = Eigen::Matrix3d::Zero();
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x) {
         if (!mask.at<uchar>(y, x)) continue;
@@ -270,7 +310,9 @@ class PlaqueSearch {
         if (std::isnan(h)) continue;
         t.vol += std::max(0.0f, h) * A.at<double>(y, x);
         const cv::Vec3f& q = s_.xyz.at<cv::Vec3f>(y + box.y, x + box.x);
-        t.c += Eigen::Vector3d(q[0], q[1], q[2]);
+        const Eigen::Vector3d qd(q[0], q[1], q[2]);
+        t.c += qd;
+        sq += qd * qd.transpose();
         ++t.nc;
         if (!interior.at<uchar>(y, x)) continue;
         t.hk.push_back(h);
@@ -283,6 +325,7 @@ class PlaqueSearch {
           if (std::isfinite(sg)) t.ssig2 += (sg * cosi) * (sg * cosi);
         }
       }
+    t.aspect = aspectOf(t.c, sq, t.nc);
     return t;
   }
 
@@ -315,7 +358,7 @@ class PlaqueSearch {
     const double mean_h = t.sh / static_cast<double>(t.hk.size());
     if (ring_n < 0.25 * ring_all || ring_known < 0.8 * ring_n) {
       // (in pixels: beyond a silhouette the reference's tangent plane is edge-on and an area means nothing)
-      at_edge_.emplace_back(t.px, std::to_string(t.px) + " px at " + atPixel(box) + ", " +
+      if (first_scale_) at_edge_.emplace_back(t.px, std::to_string(t.px) + " px at " + atPixel(box) + ", " +
                                       num(std::round(100.0 * ring_known / std::max(1, ring_n))) + " % of its surroundings known");
       return true;
     }
@@ -403,7 +446,7 @@ class PlaqueSearch {
   }
 
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
-  void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t) {
+  void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t, bool limited, const std::vector<int>& replace) {
     Plaque p;
     const double nk = static_cast<double>(t.hk.size());
     p.area = t.area;
@@ -447,31 +490,47 @@ class PlaqueSearch {
     p.volume = p.measured_fraction > 0 ? t.vol / p.measured_fraction : 0.0;
     p.outline_unmeasured = foot.open;
     const std::string what = "a plaque of " + num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box);
+    std::vector<std::string> warnings;
     if (p.measured_fraction < 0.9)
-      res_.warnings.push_back(what + " is only partly measured: " + num(std::round(100 * p.measured_fraction)) +
+      warnings.push_back(what + " is only partly measured: " + num(std::round(100 * p.measured_fraction)) +
                               " % of its footprint has a height (its mean and volume rest on that part)");
     if (p.outline_unmeasured > kOpenOutline)
-      res_.warnings.push_back(what + " borders unmeasured skin along " + num(std::round(100 * p.outline_unmeasured)) +
+      warnings.push_back(what + " borders unmeasured skin along " + num(std::round(100 * p.outline_unmeasured)) +
                               " % of its outline: it may extend there (its area is what was measured; turn the skin "
                               "towards the rig to measure all of it)");
     p.bbox = box;
     p.id = static_cast<int>(plaques_.size()) + 1;
+    for (const int l : replace) {
+      removed_[l - 1] = 1;
+      const cv::Rect& b = plaques_[l - 1].bbox;
+      for (int y = b.y; y < b.y + b.height; ++y)
+        for (int x = b.x; x < b.x + b.width; ++x)
+          if (final_labels_.at<int>(y, x) == l) final_labels_.at<int>(y, x) = 0;
+    }
     for (int y = 0; y < box.height; ++y)
       for (int x = 0; x < box.width; ++x)
         if (foot.pixels.at<uchar>(y, x)) final_labels_.at<int>(y + box.y, x + box.x) = p.id;
     plaques_.push_back(p);
+    plaque_warnings_.push_back(warnings);
+    // tentative: outlined at the threshold, and its top not clearly above it (3 stated sigma): a noise peak of a
+    // larger, lower plaque, or a plaque the first scale barely sees; one standing clearly above is the first scale's
+    tentative_.push_back(limited && !(p.top_height - 3 * p.top_height_sigma > threshold_));
+    removed_.push_back(0);
   }
 
-  /** ids in order of decreasing area, in the result and in its label image. */
+  /** ids in order of decreasing area, in the result and in its label image (a plaque replaced by a wider scale's
+   *  is dropped, its warnings with it). */
   void renumberByArea() {
-    std::vector<int> order(plaques_.size());
-    std::iota(order.begin(), order.end(), 0);
+    std::vector<int> order;
+    for (std::size_t i = 0; i < plaques_.size(); ++i)
+      if (!removed_[i]) order.push_back(static_cast<int>(i));
     std::sort(order.begin(), order.end(), [&](int a, int b) { return plaques_[a].area > plaques_[b].area; });
     std::vector<int> new_id(plaques_.size() + 1, 0);
     for (std::size_t i = 0; i < order.size(); ++i) {
       new_id[plaques_[order[i]].id] = static_cast<int>(i) + 1;
       res_.plaques.push_back(plaques_[order[i]]);
       res_.plaques.back().id = static_cast<int>(i) + 1;
+      for (const auto& w : plaque_warnings_[order[i]]) res_.warnings.push_back(w);
     }
     for (int y = 0; y < final_labels_.rows; ++y)
       for (int x = 0; x < final_labels_.cols; ++x) {
@@ -499,7 +558,7 @@ class PlaqueSearch {
     if (!low_.empty())
       res_.warnings.push_back(std::to_string(low_.size()) + " raised region" + (low_.size() == 1 ? " was" : "s were") +
                               " ignored: drawn on the smoothed heights, the measured heights inside stand less than the "
-                              "detection threshold (" + num(std::round(threshold_ * 1e5) / 100) + " mm) above the "
+                              "detection threshold (" + num(std::round(first_threshold_ * 1e5) / 100) + " mm) above the "
                               "reference on average (the noise, not a plaque); the largest: " + largest(low_));
     if (!sparse_.empty()) {
       const std::string list = largest(sparse_);
@@ -512,13 +571,19 @@ class PlaqueSearch {
 
   const Surface& s_;
   const IndurationOptions& o_;
-  const cv::Mat hs_, reach_;
-  const double threshold_, smoothing_;
+  const cv::Mat band_, reach_;
   const HeightNoise noise_;
+  // the scale being searched: smoothed heights, threshold (m), smoothing (px), fewest footprint pixels
+  cv::Mat hs_;
+  double threshold_ = 0, smoothing_ = 0, min_pixels_ = 0, first_threshold_ = 0;
+  bool first_scale_ = true;  // the regions ignored are reported from the first scale only (once)
   IndurationResult& res_;
   cv::Mat join_, off_band_, lab_, stats_, final_labels_;
   int n_ = 0;
   std::vector<Plaque> plaques_;
+  std::vector<std::vector<std::string>> plaque_warnings_;  // per plaque: partly measured, open outline
+  std::vector<char> tentative_;  // per plaque: drawn at its scale's threshold (a wider scale may replace it)
+  std::vector<char> removed_;    // per plaque: replaced by a wider scale's
   std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
   std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
   std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
@@ -526,9 +591,9 @@ class PlaqueSearch {
 
 }  // namespace
 
-void findPlaques(const Surface& s, const cv::Mat& hs, const cv::Mat& band, const cv::Mat& reach, double threshold,
-                 double smoothing, const HeightNoise& noise, IndurationResult& res) {
-  PlaqueSearch(s, hs, band, reach, threshold, smoothing, noise, res).run();
+void findPlaques(const Surface& s, const std::vector<SearchScale>& scales, const cv::Mat& band, const cv::Mat& reach,
+                 const HeightNoise& noise, IndurationResult& res) {
+  PlaqueSearch(s, band, reach, noise, res).run(scales);
 }
 
 }  // namespace induration_detail

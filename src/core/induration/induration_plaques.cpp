@@ -81,6 +81,9 @@ class PlaqueSearch {
         cv::morphologyEx(above, above, cv::MORPH_CLOSE, join_);
         above.setTo(0, off_band_);
       }
+      // a plaque is drawn inside its core's region above the threshold: a region under the scale's fewest pixels
+      // (less the holes a drawn plaque may fill: half) cannot give one
+      if (min_pixels_ > 0) above = largeEnough(above, 0.5 * min_pixels_);
       if (sc.plaque_like_only) above = plaqueLikeRegions(above, hs_, s_.xyz, s_.known_mask, smoothing_, threshold_, o_.max_height);
       n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
       std::vector<int> cores(std::max(0, n_ - 1));
@@ -152,6 +155,18 @@ class PlaqueSearch {
       return;
     }
     addPlaque(box, foot, sums, limited, replace);
+  }
+
+  /** The 8-connected regions of `mask` of at least `pixels` pixels. */
+  static cv::Mat largeEnough(const cv::Mat& mask, double pixels) {
+    cv::Mat lab, stats, cents;
+    const int n = cv::connectedComponentsWithStats(mask, lab, stats, cents, 8, CV_32S);
+    std::vector<uchar> keep(n, 0);
+    for (int k = 1; k < n; ++k) keep[k] = stats.at<int>(k, cv::CC_STAT_AREA) >= pixels ? 255 : 0;
+    cv::Mat out(mask.size(), CV_8U);
+    for (int y = 0; y < mask.rows; ++y)
+      for (int x = 0; x < mask.cols; ++x) out.at<uchar>(y, x) = keep[lab.at<int>(y, x)];
+    return out;
   }
 
   /** Whether plaque label l (0: none) holds its pixels against the scale being searched: every plaque does at the

@@ -128,7 +128,7 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                                           s.band, &unused);
     const cv::Mat hw = smoothFilled(res.height_map, wide, o.interior_margin_px);
     const double tw = detectionThreshold(hw, healthy, o.min_height, s.band);
-    if (tw < 0.8 * res.detection_threshold) {
+    if (tw < 0.8 * res.detection_threshold) {  // (a wider scale that lowers the threshold by less adds next to nothing)
       // wider than the smoothing itself (a disc of radius sigma): the noise's excursions above 3 sigma of its
       // smoothed heights cover 0.4 of that on average (4 pi sigma^2 / 9, Adler's mean excursion area), 90 % of them
       // less than 0.7-0.9 (simulated: white noise blurred by 1.5 px, smoothed by 8, 12 and 24 px)

@@ -38,6 +38,8 @@
 #include <string>
 #include <vector>
 
+#include "../../src/core/stereo/dense_stereo_detail.h"
+
 #include "skin3d/geometry/camera.h"
 #include "skin3d/stereo/calibration.h"
 #include "skin3d/stereo/dense_stereo.h"
@@ -724,6 +726,78 @@ RunResult runTool(const std::string& args, const std::string& tmp) {
   r.out = slurp(out);
   r.err = slurp(err);
   return r;
+}
+
+// The neighbour check (DenseStereoOptions::neighbour_check) on a field whose truth is known: fits on a slanted,
+// curved surface with noise of sigma 0.05 px; row streaks of "disagreement" (the semi-global answer was off) where
+// the fit is on the surface (SGBM wrong: must be kept) or 0.4-3 px off it (a wrong minimum: must stay unknown),
+// and a block larger than the check's square where nothing vouches for the centre (must stay unknown).
+TEST(DenseStereoNeighbourCheck, KeepsFitsOnTheSurfaceAndNotWrongMinima) {
+  namespace dd = skin3d::stereo::dense_detail;
+  using skin3d::stereo::UnknownReason;
+  for (unsigned seed : {1u, 2u, 3u}) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> noise(0.f, 0.05f);
+    std::uniform_int_distribution<int> len(3, 14), thick(1, 2), px(0, 239), py(0, 179);
+    std::uniform_real_distribution<float> off(0.4f, 3.0f);
+    const int rows = 180, cols = 240, radius = 11;
+    auto truth = [](int x, int y) { return 60.f + 0.08f * x - 0.05f * y + 2e-4f * (x - 120) * (x - 120); };
+    cv::Mat d(rows, cols, CV_32F), sigma(rows, cols, CV_32F, cv::Scalar(0.05f));
+    cv::Mat valid(rows, cols, CV_8U, cv::Scalar(255)), reason(rows, cols, CV_8U, cv::Scalar(0));
+    cv::Mat kind(rows, cols, CV_8U, cv::Scalar(0));  // 1: disagreement, fit right; 2: fit off the surface
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) d.at<float>(y, x) = truth(x, y) + noise(rng);
+    const cv::Rect block(150, 100, 60, 50);
+    int streaks = 0;
+    while (cv::countNonZero(kind) < 0.15 * rows * cols) {
+      const cv::Rect r = cv::Rect(px(rng), py(rng), len(rng), thick(rng)) & cv::Rect(0, 0, cols, rows);
+      if ((r & block).area() > 0 || cv::countNonZero(kind(r)) > 0) continue;  // streaks do not overlap
+      const bool wrong = (streaks++ % 2) == 1;
+      const float shift = (wrong ? off(rng) : 0.f) * (rng() % 2 ? 1.f : -1.f);
+      kind(r).setTo(wrong ? 2 : 1);
+      d(r) += shift;
+    }
+    kind(block).setTo(1);  // on the surface, but nothing agreeing near its centre
+    reason.setTo(static_cast<int>(UnknownReason::kDisagreement), kind > 0);
+    valid.setTo(0, kind > 0);
+    dd::keepFitsOnTheirNeighbours(d, sigma, valid, reason, radius);
+    int right = 0, right_kept = 0, wrong = 0, wrong_kept = 0;
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) {
+        // the block and its surroundings, where the block takes much of the square, are judged below
+        const cv::Rect near_block(block.x - radius, block.y - radius, block.width + 2 * radius, block.height + 2 * radius);
+        if (near_block.contains(cv::Point(x, y))) continue;
+        const int k = kind.at<uchar>(y, x);
+        const bool kept = valid.at<uchar>(y, x) != 0;
+        EXPECT_EQ(kept, reason.at<uchar>(y, x) == 0) << "valid and reason disagree at " << x << "," << y;
+        if (k == 1) { ++right; right_kept += kept; }
+        if (k == 2) { ++wrong; wrong_kept += kept; }
+      }
+    const cv::Rect centre(block.x + radius, block.y + radius, block.width - 2 * radius, block.height - 2 * radius);
+    const int centre_kept = cv::countNonZero(valid(centre));
+    std::printf("seed %u: fits on the surface kept %d of %d, wrong minima kept %d of %d, block centre kept %d of %d\n",
+                seed, right_kept, right, wrong_kept, wrong, centre_kept, centre.area());
+    EXPECT_GT(right_kept, 0.95 * right) << "seed " << seed;
+    EXPECT_EQ(wrong_kept, 0) << "seed " << seed;
+    EXPECT_EQ(centre_kept, 0) << "seed " << seed;
+    EXPECT_EQ(cv::countNonZero(valid(block)), cv::countNonZero(reason(block) == 0));
+  }
+  // a step of 3 px between two surfaces (an occlusion edge): fits on the step, halfway between the two sides (a window
+  // straddling it, 1.5 px from either), must stay unknown, though they lie on the plane through both sides' fits
+  std::mt19937 rng(4);
+  std::normal_distribution<float> noise(0.f, 0.05f);
+  const int rows = 60, cols = 80;
+  cv::Mat d(rows, cols, CV_32F), sigma(rows, cols, CV_32F, cv::Scalar(0.05f));
+  cv::Mat valid(rows, cols, CV_8U, cv::Scalar(255)), reason(rows, cols, CV_8U, cv::Scalar(0));
+  for (int y = 0; y < rows; ++y)
+    for (int x = 0; x < cols; ++x) d.at<float>(y, x) = 30.f + (x < 40 ? 3.f : 0.f) + noise(rng);
+  const cv::Rect step(39, 10, 2, 40);
+  d(step).setTo(31.5f);
+  reason(step).setTo(static_cast<int>(UnknownReason::kDisagreement));
+  valid(step).setTo(0);
+  const long kept = dd::keepFitsOnTheirNeighbours(d, sigma, valid, reason, 11);
+  std::printf("fits on a 3 px step kept: %ld of %d\n", kept, step.area());
+  EXPECT_EQ(kept, 0);
 }
 
 TEST(DenseStereoTool, AloeEndToEnd) {

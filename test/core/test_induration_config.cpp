@@ -24,7 +24,7 @@ std::string otherValue(const std::string& key, const std::string& current) {
   if (key == "sgbm_mode") return current == "hh" ? "sgbm" : "hh";
   if (key == "subpixel") return current == "lk" ? "sgbm" : "lk";
   if (key == "reference_model") return current == "plane" ? "quadratic" : "plane";
-  if (key == "vertical" || key == "weak_texture") return current == "true" ? "false" : "true";
+  if (current == "true" || current == "false") return current == "true" ? "false" : "true";  // the switches
   if (key == "pasi_boundaries") return "0.0001 0.0003 0.0005 0.0007";
   if (key == "block_size" || key == "refine_window") return "7";
   if (key == "z_max") return "0.75";
@@ -56,7 +56,7 @@ TEST(IndurationConfig, KeysAreUniqueAndCoverTheHeader) {
       "z_min", "z_max", "roi",
       // DenseStereoOptions but min/max_disparity and roi
       "coarse_max_width", "sgbm_mode", "block_size", "p1", "p2", "uniqueness_ratio", "lr_max_diff", "speckle_window",
-      "speckle_range", "slant_passes", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "max_sigma", "min_texture",
+      "speckle_range", "slant_passes", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "neighbour_check", "max_sigma", "min_texture",
       "min_correlation", "weak_texture",
       "vertical",
       // IndurationOptions

@@ -19,7 +19,9 @@
  *     A pixel whose fit moves more than `refine_max_shift` (semi-global level) px from the semi-global
  *     value, or whose window has too little texture (`min_texture`), too large a sigma (`max_sigma`) or a
  *     normalised correlation of the low-passed pair below `min_correlation` (the images do not look alike
- *     there), becomes unknown; `unknown_reason` says which, per pixel.
+ *     there), becomes unknown; `unknown_reason` says which, per pixel. A fit that only disagrees with the
+ *     semi-global value is kept when it lies on the plane of the agreeing fits around it (`neighbour_check`): on
+ *     weak texture the coarse semi-global answer has scattered, row-streaked errors where the fit is right.
  *     On a slanted field a window's a^2-weighted answer belongs to its texture's centroid, not its centre: it
  *     is moved back along the field's slope (without this, a freckle near the edge of a window on the side of
  *     a limb, where the disparity changes by ~0.8 px per row, biased the window by a pixel or more in clumps
@@ -79,6 +81,11 @@ struct DenseStereoOptions {
   int refine_window = 11;        //!< odd window of the local fit, px at each level
   int refine_iterations = 3;     //!< Gauss-Newton iterations per pyramid level (more at full resolution: +1)
   double refine_max_shift = 1.0; //!< px at the semi-global level: a fit farther than this from its value = unknown
+  /** A fit farther than refine_max_shift from the semi-global value is kept when it lies on the plane of the
+   *  agreeing fits within refine_window px around it (within 3 sigma of their scatter and its own), and they lie on
+   *  one smooth surface (their scatter within twice their stated sigma; not at a step): on weak texture the
+   *  semi-global answer has scattered errors of a coarse pixel, and the fit there is right. */
+  bool neighbour_check = true;
   double max_sigma = 1.0;        //!< px: pixels with a larger disparity sigma are unknown
   double min_texture = 1e-3;     //!< mean squared normalised gradient in the window below which = unknown
   /** Normalised correlation below which = unknown, of the fitted pair low-passed (Gaussian, 1 px) over a window

@@ -85,6 +85,7 @@ const Table& table() {
       SKIN3D_INT("refine_window", dense.refine_window),
       SKIN3D_INT("refine_iterations", dense.refine_iterations),
       SKIN3D_DOUBLE("refine_max_shift", dense.refine_max_shift),
+      SKIN3D_BOOL("neighbour_check", dense.neighbour_check),
       SKIN3D_DOUBLE("max_sigma", dense.max_sigma),
       SKIN3D_DOUBLE("min_texture", dense.min_texture),
       SKIN3D_DOUBLE("min_correlation", dense.min_correlation),

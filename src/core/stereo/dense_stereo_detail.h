@@ -49,6 +49,7 @@ std::string nothingToMatch(const Crops& c, const cv::Mat& dc, const DenseStereoO
 // ---- dense_stereo_refine.cpp
 FineMaps fitCoarseToFine(const Crops& c, const cv::Mat& dc, const DenseStereoOptions& o);
 void removeIslands(FineMaps& f, const DenseStereoOptions& o, int s);
+long keepFitsOnTheirNeighbours(const cv::Mat& d, const cv::Mat& sigma, cv::Mat& valid, cv::Mat& reason, int radius);
 
 }  // namespace dense_detail
 }  // namespace stereo

@@ -329,6 +329,86 @@ UnknownReason judgeFit(const DenseStereoOptions& o, bool hole, float d, float sg
 
 }  // namespace
 
+/**
+ * A fit that disagrees with the semi-global value is kept when it lies on the surface of the fits around it that
+ * agree (`neighbour_check`). On weakly textured skin the coarse semi-global answer has scattered, row-streaked
+ * errors of a coarse pixel or more, while the full-resolution fit (started from its surroundings) lands on the
+ * surface; a fit at a wrong minimum lands a pixel or more off it. The agreeing fits within `radius` px (at least
+ * half the square) give a least-squares plane; the pixel is kept when its fit differs from the plane at its centre
+ * by at most 3 sigma of a prediction: the neighbours' scatter about the plane (their noise and the surface's
+ * curvature) or the pixel's own fit sigma, whichever is larger, plus the plane's uncertainty at the centre. Where
+ * the neighbours scatter about their plane by more than twice their own stated sigma, they do not lie on one smooth
+ * surface (a step between two surfaces), and nothing is kept.
+ * One pass, judged against the agreeing fits only (kept pixels do not vouch for others). Returns the pixels kept.
+ */
+long keepFitsOnTheirNeighbours(const cv::Mat& d, const cv::Mat& sigma, cv::Mat& valid, cv::Mat& reason, int radius) {
+  constexpr int kStride = 2;
+  const cv::Mat agree = valid.clone();  // the judge's verdict before this pass
+  const int rows = d.rows, cols = d.cols;
+  std::vector<long> kept_per_row(static_cast<size_t>(rows), 0);
+  forEachIndex(rows, [&](int y) {
+    uchar* rp = reason.ptr<uchar>(y);
+    uchar* vp = valid.ptr<uchar>(y);
+    const float* dy0 = d.ptr<float>(y);
+    const float* sy0 = sigma.ptr<float>(y);
+    for (int x = 0; x < cols; ++x) {
+      if (rp[x] != static_cast<uchar>(UnknownReason::kDisagreement)) continue;
+      const double d0 = dy0[x];
+      if (!std::isfinite(d0)) continue;
+      // sums over the agreeing neighbours, in coordinates centred on the pixel and disparities relative to its fit
+      // (every second row and column: neighbouring fits share most of their window, and a 12 MP frame has millions
+      // of pixels to judge)
+      double n = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, se = 0, sue = 0, sve = 0, see = 0, ss2 = 0;
+      int square = 0;  // sampled positions inside the field
+      for (int v = -radius; v <= radius; v += kStride) {
+        const int yy = y + v;
+        if (yy < 0 || yy >= rows) continue;
+        const uchar* ap = agree.ptr<uchar>(yy);
+        const float* dp = d.ptr<float>(yy);
+        const float* sp = sigma.ptr<float>(yy);
+        for (int u = -radius; u <= radius; u += kStride) {
+          const int xx = x + u;
+          if (xx < 0 || xx >= cols) continue;
+          ++square;
+          if (!ap[xx] || !std::isfinite(dp[xx])) continue;
+          const double e = dp[xx] - d0;
+          n += 1;
+          su += u;
+          sv += v;
+          suu += u * u;
+          suv += u * v;
+          svv += v * v;
+          se += e;
+          sue += u * e;
+          sve += v * e;
+          see += e * e;
+          if (std::isfinite(sp[xx])) ss2 += static_cast<double>(sp[xx]) * sp[xx];
+        }
+      }
+      if (n < std::max(10, square / 2)) continue;  // at least half the square (clipped to the field)
+      const cv::Matx33d A(n, su, sv, su, suu, suv, sv, suv, svv);
+      const cv::Matx33d Ai = A.inv(cv::DECOMP_CHOLESKY);
+      const cv::Vec3d b(se, sue, sve);
+      const cv::Vec3d beta = Ai * b;
+      const double rss = std::max(0.0, see - beta.dot(b));
+      const double scatter2 = rss / (n - 3);
+      const double own2 = std::isfinite(sy0[x]) ? static_cast<double>(sy0[x]) * sy0[x] : scatter2;
+      const double var = std::max(scatter2, own2) + scatter2 * Ai(0, 0);
+      // the neighbours vouch only where they lie on a smooth surface: their scatter about the plane within twice
+      // their own stated sigma (at a step between two surfaces it is many times wider, and a fit there proves nothing)
+      if (scatter2 > 4.0 * ss2 / n) continue;
+      if (beta[0] * beta[0] <= 9.0 * var) {  // beta[0] = the plane at the centre - the pixel's fit
+        vp[x] = 255;
+        rp[x] = static_cast<uchar>(UnknownReason::kKnown);
+        ++kept_per_row[static_cast<size_t>(y)];
+      }
+    }
+  });
+  long kept = 0;
+  for (long k : kept_per_row) kept += k;
+  return kept;
+}
+
 /** subpixel = "lk": the coarse-to-fine local fit from the coarse answer, then each pixel judged (judgeFit). */
 FineMaps fitCoarseToFine(const Crops& c, const cv::Mat& dc, const DenseStereoOptions& o) {
   const int s = c.s;
@@ -393,6 +473,7 @@ FineMaps fitCoarseToFine(const Crops& c, const cv::Mat& dc, const DenseStereoOpt
       }
     }
   }
+  if (o.neighbour_check) keepFitsOnTheirNeighbours(f.d, f.sigma, f.valid, f.reason, o.refine_window);
   return f;
 }
 

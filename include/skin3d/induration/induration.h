@@ -9,7 +9,8 @@
  *     distances = outlier; the same rule as PCL's StatisticalOutlierRemoval).
  *  2. Reference surface: a RANSAC plane (PCL SACSegmentation on a subsample) gives the start; then
  *     alternate (a) a robust (Tukey) least-squares fit of the reference model ("plane"; "quadric": an implicit
- *     quadric surface, Taubin fit, heights = distances to it, for a limb at any pose; "quadratic": height over
+ *     quadric surface, Taubin fit, heights = distances to it, for a limb at any pose, its first (unweighted) fit on
+ *     the largest connected surface only, not the background or another body in view; "quadratic": height over
  *     the plane as a quadric of the in-plane coordinates) to the points not marked as plaque, and (b) marking
  *     as plaque the regions of at least a quarter of `min_area` in the working band that stand above the
  *     detection threshold (see 4; dilated by `exclusion_margin_px`), until the mask stops changing. (Excluding
@@ -40,7 +41,9 @@
  *     reaches a plaque drawn already is that plaque's shoulder (no valley separates them), not a plaque. Ignored,
  *     with a warning: regions whose surroundings within the band are less than 80 % known (the matcher's gaps of a
  *     few px closed first; the edge of the measured surface, islands of mismatches), with less than
- *     `min_measured_share` of their footprint measured (scattered matches), or higher than `max_height`.
+ *     `min_measured_share` of their footprint measured (scattered matches), whose footprint fills less than half
+ *     the ellipse of its second moments (pieces strung along an edge or scattered: a plaque is one patch of skin),
+ *     or higher than `max_height`.
  *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
  *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
  *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by

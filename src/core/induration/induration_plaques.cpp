@@ -32,6 +32,8 @@ constexpr double kRingWidth = 1.0e-3;
  *  were filled across gaps and averaged over several mm, and over a sparse region they say little (the at-edge
  *  rule asks the same of a plaque's surroundings). */
 constexpr double kWideMeasuredShare = 0.8;
+/** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
+constexpr double kMinEllipseFill = 0.5;
 
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
@@ -149,12 +151,31 @@ class PlaqueSearch {
     // a plaque only the wider scale finds was drawn on heights smoothed (and filled) over several mm: it must be
     // oval like a plaque, not a strip of the reference's departure along the band, and measured over most of it
     if (!first_scale_ && (sums.aspect > kMaxPlaqueAspect || sums.nc < kWideMeasuredShare * sums.px)) return;
+    // a plaque is one patch of skin: its footprint fills the ellipse of its second moments (a filled ellipse: 1; an
+    // irregular or kidney-shaped outline: 0.7-0.9), while pieces strung along the edge of the measured surface or
+    // scattered over it fill a few per cent of theirs
+    const double fill = ellipseFill(foot.pixels);
+    if (fill < kMinEllipseFill) {
+      if (first_scale_) scattered_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+                                           num(std::round(100.0 * fill)) + " % of its ellipse");
+      return;
+    }
     if (sums.nc < o_.min_measured_share * sums.px) {
       if (first_scale_) sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
                                         num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
       return;
     }
     addPlaque(box, foot, sums, limited, replace);
+  }
+
+  /** Pixels of `m` over the area of the ellipse of its second moments (4 pi sqrt of their eigenvalues' product: a
+   *  filled ellipse's own area); 0 for fewer than 3 pixels or a degenerate (straight) set. */
+  static double ellipseFill(const cv::Mat& m) {
+    const cv::Moments mo = cv::moments(m, true);
+    if (mo.m00 < 3) return 0;
+    const double a = mo.mu20 / mo.m00, b = mo.mu02 / mo.m00, c = mo.mu11 / mo.m00;
+    const double det = a * b - c * c;
+    return det > 0 ? mo.m00 / (4 * M_PI * std::sqrt(det)) : 0;
   }
 
   /** The 8-connected regions of `mask` of at least `pixels` pixels. */
@@ -575,6 +596,11 @@ class PlaqueSearch {
                               " ignored: drawn on the smoothed heights, the measured heights inside stand less than the "
                               "detection threshold (" + num(std::round(first_threshold_ * 1e5) / 100) + " mm) above the "
                               "reference on average (the noise, not a plaque); the largest: " + largest(low_));
+    if (!scattered_.empty())
+      res_.warnings.push_back(std::to_string(scattered_.size()) + " raised region" +
+                              (scattered_.size() == 1 ? " was" : "s were") + " ignored: scattered pieces fill under " +
+                              num(std::round(100 * kMinEllipseFill)) + " % of the ellipse of their moments (a plaque is one "
+                              "patch of skin); the largest: " + largest(scattered_));
     if (!sparse_.empty()) {
       const std::string list = largest(sparse_);
       res_.warnings.push_back(std::to_string(sparse_.size()) + " raised region" + (sparse_.size() == 1 ? " was" : "s were") +
@@ -601,6 +627,7 @@ class PlaqueSearch {
   std::vector<char> removed_;    // per plaque: replaced by a wider scale's
   std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
   std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
+  std::vector<std::pair<double, std::string>> scattered_;  // ignored regions of scattered pieces: area, description
   std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
 };
 

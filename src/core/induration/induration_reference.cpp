@@ -36,6 +36,73 @@ std::vector<Eigen::Vector3d> subsample(const cv::Mat& xyz, const cv::Mat& use, i
   return pts;
 }
 
+/**
+ * The known points of the largest connected surface. Neighbours (on a grid of at most about 250000 points, across
+ * gaps of up to 3 unknown ones) are connected when they are closer in 3-D than 10 times the median distance of
+ * neighbouring points (times the points spanned): a surface stays connected up to about 84 deg of incidence, while
+ * the background and mismatches at other depths are cut off. A
+ * curved model's first fit, unweighted, starts on it: a tenth of the points on another body or on the background
+ * could pull that fit into a saddle between them, which the robust passes after it do not leave.
+ */
+cv::Mat largestSurface(const cv::Mat& xyz, const cv::Mat& known) {
+  const int total = cv::countNonZero(known);
+  const int step = std::max(1, static_cast<int>(std::ceil(std::sqrt(total / 250000.0))));
+  const int gw = (xyz.cols + step - 1) / step, gh = (xyz.rows + step - 1) / step;
+  std::vector<Eigen::Vector3f> p(static_cast<size_t>(gw) * gh);
+  std::vector<char> ok(p.size(), 0);
+  for (int gy = 0; gy < gh; ++gy)
+    for (int gx = 0; gx < gw; ++gx) {
+      const int x = gx * step, y = gy * step;
+      const cv::Vec3f& q = xyz.at<cv::Vec3f>(y, x);
+      if (known.at<uchar>(y, x) && std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2])) {
+        p[gy * gw + gx] = Eigen::Vector3f(q[0], q[1], q[2]);
+        ok[gy * gw + gx] = 1;
+      }
+    }
+  std::vector<float> spacing;
+  for (int i = 0; i < static_cast<int>(p.size()); ++i) {
+    if (!ok[i]) continue;
+    if ((i % gw) + 1 < gw && ok[i + 1]) spacing.push_back((p[i + 1] - p[i]).norm());
+    if (i + gw < static_cast<int>(p.size()) && ok[i + gw]) spacing.push_back((p[i + gw] - p[i]).norm());
+  }
+  if (spacing.size() < 100) return known.clone();
+  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
+  const float tol = 10.f * spacing[spacing.size() / 2];
+  std::vector<int> parent(p.size());
+  for (int i = 0; i < static_cast<int>(parent.size()); ++i) parent[i] = i;
+  auto root = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  // each point is joined to the next known one to its right and below, across gaps of up to kGap unknown points
+  // (a matcher's gap or outliers removed along a step), the tolerance growing with the distance spanned
+  constexpr int kGap = 3;
+  const int n_points = static_cast<int>(p.size());
+  for (int i = 0; i < n_points; ++i) {
+    if (!ok[i]) continue;
+    for (int k = 1; k <= kGap + 1 && (i % gw) + k < gw; ++k)
+      if (ok[i + k]) {
+        if ((p[i + k] - p[i]).norm() < tol * k) parent[root(i)] = root(i + k);
+        break;
+      }
+    for (int k = 1; k <= kGap + 1 && i + k * gw < n_points; ++k)
+      if (ok[i + k * gw]) {
+        if ((p[i + k * gw] - p[i]).norm() < tol * k) parent[root(i)] = root(i + k * gw);
+        break;
+      }
+  }
+  std::vector<int> size(p.size(), 0);
+  int best = -1;
+  for (int i = 0; i < static_cast<int>(p.size()); ++i)
+    if (ok[i] && ++size[root(i)] > (best < 0 ? 0 : size[best])) best = root(i);
+  cv::Mat grid(gh, gw, CV_8U, cv::Scalar(0));
+  for (int i = 0; i < static_cast<int>(p.size()); ++i)
+    if (ok[i] && root(i) == best) grid.at<uchar>(i / gw, i % gw) = 255;
+  cv::Mat full;
+  cv::resize(grid, full, xyz.size(), 0, 0, cv::INTER_NEAREST);
+  return full & known;
+}
+
 Vec10 monomials(const Eigen::Vector3d& y) {
   Vec10 m;
   m << y.x() * y.x(), y.y() * y.y(), y.z() * y.z(), y.x() * y.y(), y.x() * y.z(), y.y() * y.z(), y.x(), y.y(), y.z(), 1.0;
@@ -304,7 +371,7 @@ Alternation alternate(const Surface& s, const ReferenceSurface& start, const std
     // the first pass measures against the RANSAC plane itself: a fit to every point would be pulled towards
     // large plaques; later passes fit the healthy skin only (a curved model first fits all points robustly
     // with a wider cut-off: a curved surface leaves a plane's band)
-    if (it == 0 && curved && !fit(use, 3 * s.band)) return a;
+    if (it == 0 && curved && !fit(use & largestSurface(s.xyz, s.known_mask), 3 * s.band)) return a;
     if (it > 0 && !fit(use, s.band)) return a;
     const cv::Mat h = heights(s.xyz, a.ref);
     // the smoothing is chosen on the healthy skin: from the second pass on, once the plaques are masked

@@ -40,9 +40,9 @@ std::vector<Eigen::Vector3d> subsample(const cv::Mat& xyz, const cv::Mat& use, i
  * The known points of the largest connected surface. Neighbours (on a grid of at most about 250000 points, across
  * gaps of up to 3 unknown ones) are connected when they are closer in 3-D than 10 times the median distance of
  * neighbouring points (times the points spanned): a surface stays connected up to about 84 deg of incidence, while
- * the background and mismatches at other depths are cut off. A
- * curved model's first fit, unweighted, starts on it: a tenth of the points on another body or on the background
- * could pull that fit into a saddle between them, which the robust passes after it do not leave.
+ * the background and mismatches at other depths are cut off. A curved model's first fit, unweighted, starts on it:
+ * a tenth of the points on another body or on the background could pull that fit into a saddle between them, which
+ * the robust passes after it do not leave.
  */
 cv::Mat largestSurface(const cv::Mat& xyz, const cv::Mat& known) {
   const int total = cv::countNonZero(known);

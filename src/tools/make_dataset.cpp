@@ -45,7 +45,7 @@ using namespace skin3d;
 using namespace make_dataset_detail;  // NOLINT(build/namespaces): the tool's own helpers
 
 const char* kUsage =
-    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--compress jpeg[:Q]|png] [--quiet]\n"
+    "usage: make_dataset KIND --out FILE.bag [--seed N] [--config FILE.yaml] [--ideal] [--frames N] [--start S] [--compress jpeg[:Q]|png] [--truth-only] [--quiet]\n"
     "  KIND            globe-landmarks | globe-images | workpiece | skin\n"
     "  --out FILE.bag  the bag to write; the ground truth goes to FILE.truth.yaml beside it\n"
     "  --seed N        random seed (default 1, or the config's seed); same seed + config = same data\n"
@@ -55,12 +55,14 @@ const char* kUsage =
     "  --start SECONDS stamp of the first frame (default 1000; e.g. 1700000000 for epoch stamps as a recording has)\n"
     "  --compress C    images as image_transport's compressed topics (stereo/{left,right}/image_raw/compressed,\n"
     "                  sensor_msgs/CompressedImage): jpeg (quality 90), jpeg:Q (Q 1 ... 100) or png (lossless)\n"
+    "  --truth-only    skin sweeps: write FILE.truth.yaml and FILE.visible.png only, not the bag (nothing rendered):\n"
+    "                  the truth of a bag made with the same kind, seed, config and --frames\n"
     "  --quiet         no progress output (progress goes to stderr)\n";
 
 struct Options {
   std::string kind, out, config;
   long long seed = -1;
-  bool ideal = false, quiet = false;
+  bool ideal = false, quiet = false, truth_only = false;
   int frames = -1;
 };
 
@@ -138,6 +140,8 @@ bool parseArgs(int argc, char** argv, Options* o) {
       o->ideal = true;
     } else if (a == "--quiet") {
       o->quiet = true;
+    } else if (a == "--truth-only") {
+      o->truth_only = true;
     } else if (a.rfind("__", 0) == 0) {
       // roslaunch/rosrun remapping arguments: ignore.
     } else if (a[0] != '-' && o->kind.empty()) {
@@ -178,7 +182,7 @@ int main(int argc, char** argv) {
     if (o.ideal) sim::makeIdeal(&c);
     sim::validateDatasetConfig(c);
     frames = c.kind == sim::DatasetKind::Workpiece ? c.workpiece.frames
-             : c.kind == sim::DatasetKind::Skin    ? c.skin.frames
+             : c.kind == sim::DatasetKind::Skin    ? (c.skin.sweep.enabled ? c.skin.sweep.frames : c.skin.frames)
                                                    : c.globe.frames;
     if (o.frames > 0) frames = std::min(frames, o.frames);
   } catch (const sim::SimConfigError& e) {
@@ -186,10 +190,16 @@ int main(int argc, char** argv) {
     return 1;
   }
 
+  if (o.truth_only && !(c.kind == sim::DatasetKind::Skin && c.skin.sweep.enabled)) {
+    std::cerr << "make_dataset: --truth-only is for skin sweeps (skin.sweep.enabled)\n";
+    return 2;
+  }
+  g_truth_only = o.truth_only;
+  const std::string bag_path = o.truth_only ? o.out + ".truth-only.tmp" : o.out;
   const auto t0 = std::chrono::steady_clock::now();
   rosbag::Bag bag;
   try {
-    bag.open(o.out, rosbag::bagmode::Write);
+    bag.open(bag_path, rosbag::bagmode::Write);
   } catch (const std::exception& e) {
     std::cerr << "make_dataset: cannot write '" << o.out << "': " << e.what() << "\n";
     return 3;
@@ -206,7 +216,8 @@ int main(int argc, char** argv) {
   truth << YAML::Key << "config" << YAML::Value << (o.config.empty() ? std::string("(defaults)") : o.config);
   truth << YAML::Key << "world_frame" << YAML::Value
         << (c.kind == sim::DatasetKind::Workpiece ? "plate frame (top surface z = 0)"
-            : c.kind == sim::DatasetKind::Skin    ? "limb frame (x along the axis, cross-section in y, z)"
+            : c.kind == sim::DatasetKind::Skin    ? (c.skin.sweep.enabled ? "the first pair's left optical frame"
+                                                                          : "limb frame (x along the axis, cross-section in y, z)")
                                                   : "left optical frame at t = 0");
   int rc = 0;
   try {
@@ -228,6 +239,7 @@ int main(int argc, char** argv) {
   }
   truth << YAML::EndMap;
   bag.close();
+  if (o.truth_only) std::remove(bag_path.c_str());
   const std::string tpath = truthPath(o.out);
   if (!writeText(tpath, std::string(truth.c_str()) + "\n")) {
     std::cerr << "make_dataset: cannot write " << tpath << "\n";
@@ -235,7 +247,7 @@ int main(int argc, char** argv) {
   }
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!o.quiet)
-    std::cout << "make_dataset: wrote " << o.out << " (" << fileSize(o.out) / 1e6 << " MB) and " << tpath << " in "
-              << secs << " s" << std::endl;
+    std::cout << "make_dataset: wrote " << (o.truth_only ? std::string() : o.out + " (" + std::to_string(fileSize(o.out) / 1e6) + " MB) and ")
+              << tpath << " in " << secs << " s" << std::endl;
   return rc;
 }

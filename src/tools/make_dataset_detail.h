@@ -25,6 +25,8 @@ inline const std::string kWorldFrame = "world";
 inline ros::Time g_start(1000.0);
 /** --compress: -1 raw images (image_raw), 0 PNG, 1 ... 100 JPEG of that quality (image_raw/compressed). */
 inline int g_compress = -1;
+/** --truth-only: the sweep writes its truth without rendering a pair. */
+inline bool g_truth_only = false;
 /** One camera's image into `bag` on stereo/SIDE/image_raw, or image_raw/compressed as --compress says. */
 void writeImage(rosbag::Bag& bag, const std::string& side, const ros::Time& stamp, const sensor_msgs::Image& img);  // the first stamp (--start): a fixed, valid ROS time, so that bags are deterministic
 
@@ -42,5 +44,11 @@ int makeGlobe(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag,
 int makeWorkpiece(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet);
 int makeSkin(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
              const std::string& visible_path);
+/** make_dataset_sweep.cpp: the skin dataset with skin.sweep.enabled (a hand-held sweep around the limb); writes
+ *  the swept-skin coverage truth to `visible_path`. */
+int makeSkinSweep(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
+                  const std::string& visible_path);
+/** The limb and its plaques' truth (make_dataset_scenes.cpp), points in the frame T_L_W maps the limb frame to. */
+void emitSkinTruth(YAML::Emitter& truth, const skin3d::sim::SkinScene& scene, const Eigen::Isometry3d& T_L_W);
 
 }  // namespace make_dataset_detail

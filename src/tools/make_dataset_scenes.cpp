@@ -199,6 +199,8 @@ cv::Mat skinVisibility(const sim::SkinScene& scene, const geometry::StereoRig& t
   return out;
 }
 
+}  // namespace
+
 void emitSkinTruth(YAML::Emitter& truth, const sim::SkinScene& scene, const Eigen::Isometry3d& T_L_W) {
   const sim::SkinGeometry& g = scene.geometry();
   truth << YAML::Key << "limb" << YAML::Value << YAML::BeginMap;
@@ -227,6 +229,7 @@ void emitSkinTruth(YAML::Emitter& truth, const sim::SkinScene& scene, const Eige
     truth << YAML::Key << "mean_height_mm" << YAML::Value << t.mean_height * 1e3;  // over the footprint
     truth << YAML::Key << "area_mm2" << YAML::Value << t.footprint_area * 1e6;
     truth << YAML::Key << "top_area_mm2" << YAML::Value << t.top_area * 1e6;
+    truth << YAML::Key << "half_height_area_mm2" << YAML::Value << t.half_height_area * 1e6;
     truth << YAML::Key << "volume_mm3" << YAML::Value << t.volume * 1e9;
     truth << YAML::Key << "pasi_class" << YAML::Value << pasi;
     truth << YAML::Key << "centroid_left_m" << YAML::Value;
@@ -270,11 +273,10 @@ void emitSkinTruth(YAML::Emitter& truth, const sim::SkinScene& scene, const Eige
   truth << YAML::EndSeq;
 }
 
-}  // namespace
-
 int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
              const std::string& visible_path) {
   const sim::SkinConfig& k = c.skin;
+  if (k.sweep.enabled) return makeSkinSweep(c, frames, bag, truth, quiet, visible_path);
   const sim::RigConfig rc = k.scaledRig();
   const geometry::StereoRig true_rig = rc.makeRig();
   const sim::PerturbedCalibration calib = sim::perturbCalibration(true_rig, c.images.perturbation, c.seed, k.working_distance);

@@ -80,11 +80,19 @@ const char* kUsage =
     "               two threads (same results; for timing comparisons)\n"
     "  --induration measure plaque heights instead (dense stereo + induration; --config/--set take the keys of\n"
     "               config/induration.yaml; writes induration.yaml, height_map.png, surface.ply)\n"
+    "  --site       a sweep over one body site: every pair measured as with --induration, registered to the site\n"
+    "               fused so far and fused into one height field over the body; plaques measured once on it; writes\n"
+    "               site.yaml, site_height_map.png, site_coverage.png, site_surface.ply too (docs/site.md). Site keys\n"
+    "               for --set: site_cell_mm (0 = the pixel footprint), site_max_incidence_deg (60), site_register\n"
+    "               (true), site_register_stride (4), site_min_overlap (0.2), site_max_correction_mm (5)\n"
+    "  --site-poses with --site: the pose topic (geometry_msgs/PoseStamped or nav_msgs/Odometry, world <- left\n"
+    "               optical frame; default slam/odometry; ground_truth/pose for a simulated sweep)\n"
     "  --maps       with --induration: last (default: the last frame's maps) | all (every frame's too, in\n"
     "               DIR/frames/NNNN/ as it is measured)\n"
     "exit status: 0 done; 1 bad data (nothing could be processed); 2 bad command line; 3 the results could not be\n"
     "  written (or the bag not read); 4 (--induration) results written, but in some frame the healthy-skin reference\n"
-    "  did not follow the skin: plaques there could not be measured (the warnings and the hatched height map say where)\n";
+    "  did not follow the skin: plaques there could not be measured (the warnings and the hatched height map say where);\n"
+    "  5 (--site) results written, but fewer than two frames could be fused (the sweep does not overlap)\n";
 
 /** A strict whole number for `option`, or exit 2 with the message naming it. */
 long whole(const std::string& option, const std::string& v, long min, long max) {
@@ -120,8 +128,8 @@ std::pair<std::string, std::string> keyValue(const std::string& option, const st
 int main(int argc, char** argv) {
   skin3d::keepLargeBuffers();  // 13-megapixel buffers from the heap, not fresh mmap()s
   tools::SlamRun a;
-  bool induration = false;
-  std::string maps = "last";
+  bool induration = false, site = false;
+  std::string maps = "last", site_poses;
   a.command_line.assign(argv, argv + argc);
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
@@ -148,6 +156,8 @@ int main(int argc, char** argv) {
     else if (k == "--quiet") a.quiet = true;
     else if (k == "--serial") a.serial = true;
     else if (k == "--induration") induration = true;
+    else if (k == "--site") site = induration = true;
+    else if (k == "--site-poses") site_poses = value();
     else if (k == "--maps") maps = value();
     else if (k == "--set") a.sets.push_back(keyValue(k, value()));
     else if (k == "-h" || k == "--help") {
@@ -207,6 +217,10 @@ int main(int argc, char** argv) {
       r.quiet = a.quiet;
       r.ns = a.ns;
       r.command_line = a.command_line;
+      r.site = site;
+      r.site_poses = site_poses;
+      r.sets.clear();
+      for (const auto& kv : a.sets) (kv.first.rfind("site_", 0) == 0 ? r.site_sets : r.sets).push_back(kv);
       return tools::runInduration(r);
     }
     return tools::runSlam(a);

@@ -17,7 +17,15 @@
 #include <cmath>
 #include <cstdio>
 
+#include <geometry_msgs/PoseStamped.h>
+#include <nav_msgs/Odometry.h>
+
+#include <map>
+#include <memory>
+
+#include "skin3d/common/cli.h"
 #include "skin3d/induration/induration_config.h"
+#include "skin3d/site/site_fusion.h"
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/ros/induration_runner.h"
 #include "skin3d/ros/stereo_pairs.h"
@@ -56,6 +64,74 @@ void printTable(const induration::FrameMeasurement& last, int frames, int droppe
   std::printf("results: %s (induration.yaml, height_map.png, surface.ply)\n", out.c_str());
 }
 
+/** The site options from --set site_*=value (documented in process_bag's usage and docs/site.md). */
+site::SiteOptions siteOptions(const std::vector<std::pair<std::string, std::string>>& sets) {
+  site::SiteOptions o;
+  for (const auto& [k, v] : sets) {
+    auto num = [&](double min) { return common::parseNumber(k, v, min, false); };
+    if (k == "site_cell_mm") o.cell = num(0) * 1e-3;
+    else if (k == "site_max_incidence_deg") o.max_incidence_deg = num(0);
+    else if (k == "site_register") {
+      if (v != "true" && v != "false") throw std::invalid_argument("site_register must be true or false (got '" + v + "')");
+      o.register_frames = v == "true";
+    } else if (k == "site_register_stride") o.register_stride = static_cast<int>(common::parseWholeNumber(k, v, 1, 64));
+    else if (k == "site_min_overlap") o.min_overlap = num(0);
+    else if (k == "site_max_correction_mm") o.max_correction = num(0) * 1e-3;
+    else
+      throw std::invalid_argument("unknown site option '" + k + "' (site_cell_mm, site_max_incidence_deg, site_register, "
+                                  "site_register_stride, site_min_overlap, site_max_correction_mm)");
+  }
+  o.validate();
+  return o;
+}
+
+/** Every pose of `topic` (PoseStamped or Odometry), by stamp. */
+std::map<double, Eigen::Isometry3d> readPoses(const rosbag::Bag& bag, const std::string& path, const std::string& topic,
+                                              const std::string& ns) {
+  const ros_io::BagTopics t(bag, path, {topic}, ns);
+  std::map<double, Eigen::Isometry3d> out;
+  rosbag::View view(bag, rosbag::TopicQuery(t.stored(topic)));
+  for (const rosbag::MessageInstance& m : view) {
+    geometry_msgs::Pose p;
+    double stamp;
+    if (auto ps = m.instantiate<geometry_msgs::PoseStamped>()) {
+      p = ps->pose;
+      stamp = ps->header.stamp.toSec();
+    } else if (auto od = m.instantiate<nav_msgs::Odometry>()) {
+      p = od->pose.pose;
+      stamp = od->header.stamp.toSec();
+    } else {
+      throw std::invalid_argument("'" + topic + "' in '" + path + "' is " + m.getDataType() +
+                                  ", not geometry_msgs/PoseStamped or nav_msgs/Odometry");
+    }
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z).normalized().toRotationMatrix();
+    T.translation() = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
+    out[stamp] = T;
+  }
+  return out;
+}
+
+void printSite(const site::SiteResult& r, const std::string& out) {
+  std::printf("\nsite: %d frame(s) fused, %d left out; surface %s (cell %.0f um, %.0f mm^2 fused), seams %.1f um RMS "
+              "(%.1f um beyond the noise, rigid part %.1f um); measured in %.1f s\n",
+              r.frames_fused, r.frames_left_out, r.surface.model.c_str(), r.cell * 1e6, r.fused_area * 1e6, r.seam_rms * 1e6,
+              r.seam_excess * 1e6, r.seam_rigid * 1e6, r.seconds_measure);
+  std::printf("| plaque | centroid x y z (mm, world) | area (mm²) | volume (mm³) | top | mean | PASI | views | spread (um) | best incidence (deg) | measured |\n"
+              "|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const auto& p : r.plaques)
+    std::printf("| %d | %.1f %.1f %.1f | %.1f | %.2f | %.3f | %.3f | %d | %d | %.0f | %.0f | %.0f %% |\n", p.id, 1e3 * p.centroid.x(),
+                1e3 * p.centroid.y(), 1e3 * p.centroid.z(), 1e6 * p.area, 1e9 * p.volume, 1e3 * p.top_height,
+                1e3 * p.mean_height, p.pasi_class, p.views, 1e6 * p.spread, p.best_incidence_deg, 100 * p.measured_share);
+  for (const auto& p : r.grazing)
+    std::printf("| (never seen within 45 deg: best %.0f deg) | %.1f %.1f %.1f | %.1f | %.2f | %.3f | %.3f | %d | %d | - | %.0f | %.0f %% |\n",
+                p.best_incidence_deg, 1e3 * p.centroid.x(), 1e3 * p.centroid.y(), 1e3 * p.centroid.z(), 1e6 * p.area,
+                1e9 * p.volume, 1e3 * p.top_height, 1e3 * p.mean_height, p.pasi_class, p.views, p.best_incidence_deg,
+                100 * p.measured_share);
+  for (const auto& w : r.warnings) std::printf("  warning: %s\n", w.c_str());
+  std::printf("site results: %s (site.yaml, site_height_map.png, site_coverage.png, site_surface.ply)\n", out.c_str());
+}
+
 }  // namespace
 
 int runInduration(const IndurationRun& a) {
@@ -77,6 +153,45 @@ int runInduration(const IndurationRun& a) {
                                   " (" + topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
   }
   if (!a.quiet) std::fprintf(stderr, "process_bag: %s\n", topics.summary().c_str());
+  // --site: the poses, and the fusion that every measured frame goes into
+  std::unique_ptr<site::SiteFusion> fusion;
+  std::map<double, Eigen::Isometry3d> poses;
+  std::string pose_topic = a.site_poses.empty() ? "slam/odometry" : a.site_poses;
+  if (a.site) {
+    fusion = std::make_unique<site::SiteFusion>(siteOptions(a.site_sets), opt.induration);
+    try {
+      poses = readPoses(bag, a.bag, pose_topic, a.ns);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(std::string("--site needs the rig's pose for every pair: ") + e.what() +
+                                  (a.site_poses.empty() ? " (record slam/odometry with the SLAM running, or name a pose topic with "
+                                                          "--site-poses TOPIC, e.g. ground_truth/pose of a simulated sweep)" : ""));
+    }
+    if (poses.empty()) throw std::invalid_argument("--site: '" + pose_topic + "' in '" + a.bag + "' holds no pose");
+    if (!a.quiet) std::fprintf(stderr, "process_bag: site: %zu poses on %s\n", poses.size(), pose_topic.c_str());
+  }
+  auto fuse = [&](const induration::FrameMeasurement& m) {
+    constexpr double kTolerance = 0.01;  // s
+    auto it = poses.lower_bound(m.record.stamp - kTolerance);
+    if (it == poses.end() || it->first > m.record.stamp + kTolerance) {
+      fusion->skip(m.record.stamp, "no pose on " + pose_topic + " within 10 ms of its stamp");
+      std::fprintf(stderr, "process_bag: site: frame at t = %.3f s has no pose within 10 ms: left out\n", m.record.stamp);
+      return;
+    }
+    auto best = it;
+    for (auto q = it; q != poses.end() && q->first <= m.record.stamp + kTolerance; ++q)
+      if (std::fabs(q->first - m.record.stamp) < std::fabs(best->first - m.record.stamp)) best = q;
+    const site::SiteFrame& f = fusion->add(m.cloud, m.record.result, best->second, m.record.stamp);
+    if (a.quiet) return;
+    if (f.fused)
+      std::printf("  site: fused %ld samples (overlap %.0f %%; seams over %d blocks %.1f um RMS, %.1f um beyond the noise, "
+                  "rigid part %.1f um; registration moved it %.3f mm in %d iterations; %.1f s registration, %.1f s fusion)\n",
+                  f.samples, 100 * f.overlap, f.seam_blocks, f.seam_rms * 1e6, f.seam_excess * 1e6, f.seam_rigid * 1e6,
+                  f.correction_rms * 1e3, f.registration_iterations, f.seconds_register, f.seconds_fuse);
+    else
+      std::printf("  site: frame left out: %s\n", f.reason.c_str());
+    std::fflush(stdout);
+  };
+
   rosbag::View view(bag, rosbag::TopicQuery(ros_io::stereoTopicsRead(topics)));
   int expected = static_cast<int>(topics.count(ros_io::stereoImageTopic(topics, true)));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
@@ -87,8 +202,13 @@ int runInduration(const IndurationRun& a) {
   int fed = 0;
   auto feed = [&](const sensor_msgs::Image::ConstPtr& l, const sensor_msgs::Image::ConstPtr& r) {
     ++fed;
+    const int before = runner.frames();
     if (runner.onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg()) && !a.quiet)
       printFrame(*runner.last(), runner.frames(), expected);
+    if (fusion) {
+      if (runner.frames() > before) fuse(*runner.last());
+      else fusion->skip(l->header.stamp.toSec(), "the pair could not be measured (the log above says why)");
+    }
   };
   const auto full = [&]() { return a.frames >= 0 && fed >= a.frames; };
   for (const rosbag::MessageInstance& mi : view) {
@@ -109,6 +229,16 @@ int runInduration(const IndurationRun& a) {
   std::string message;
   if (!runner.save(a.out, &message, a.command_line, a.bag, &pairs_ledger)) throw std::runtime_error(message);
   if (!a.quiet) printTable(*runner.last(), runner.frames(), dropped.dropped(), a.out);
+  if (fusion) {
+    const site::SiteResult sr = fusion->measure();
+    site::writeSiteResults(a.out, sr, fusion->frames(), a.bag, a.command_line);
+    if (!a.quiet) printSite(sr, a.out);
+    if (runner.frames() > 1 && sr.frames_fused < 2) {
+      std::fprintf(stderr, "process_bag: site: %d of %d frames could be fused: the sweep's frames do not overlap (site.yaml "
+                           "names why each was left out); exit status 5\n", sr.frames_fused, runner.frames());
+      return 5;
+    }
+  }
   if (const int n = runner.framesNotFollowed()) {
     std::fprintf(stderr,
                  "process_bag: in %d of %d frames the healthy-skin reference did not follow the skin: plaques there "

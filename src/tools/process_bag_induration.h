@@ -19,6 +19,11 @@ struct IndurationRun {
   bool every_frame_maps = false;                             //!< also each frame's maps, in out/frames/NNNN/
   std::string ns;                                            //!< bag namespace (ros_io::BagTopics; "" = found)
   std::vector<std::string> command_line;                     //!< for parameters.yaml
+  /** --site: fuse the frames into one site (site/site_fusion.h) with the poses of `site_poses` (PoseStamped or
+   *  Odometry; "" = slam/odometry); `site_sets` are the site_* keys of --set. */
+  bool site = false;
+  std::string site_poses;
+  std::vector<std::pair<std::string, std::string>> site_sets;
 };
 
 /** @brief Measures every pair; writes the results. @throws std::invalid_argument (bad data/config),

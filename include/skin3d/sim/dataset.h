@@ -23,6 +23,7 @@
 #include "skin3d/sim/render.h"
 #include "skin3d/sim/sim_error.h"
 #include "skin3d/sim/skin.h"
+#include "skin3d/sim/skin_sweep.h"
 
 namespace skin3d {
 namespace sim {
@@ -157,6 +158,9 @@ struct SkinConfig {
   double fps = 2.0;
   double contrast = 1.0;              //!< skin albedo modulation (1: a few grey levels)
   bool scale_texture = true;          //!< psoriatic scale on plaque tops
+  /** A hand-held sweep around the limb (skin_sweep.h) instead of a still rig: `frames` / `fps` above are then
+   *  the sweep's, and the truth is in the first left optical frame (`world`). */
+  SkinSweepConfig sweep;
   RigConfig scaledRig() const { return scaleRig(rig, resolution_scale); }
   /** @brief The scene's geometry and pose for a seed (random or as configured). */
   SkinGeometry geometryFor(std::uint64_t seed, double* yaw, double* tilt, double* roll) const;

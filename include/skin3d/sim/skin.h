@@ -82,6 +82,9 @@ struct SkinPlaqueTruth {
   double mean_height = 0;      //!< m, mean distance over the footprint
   double footprint_area = 0;   //!< m^2 on the base surface where the height > 0
   double top_area = 0;         //!< m^2 where the height >= 99 % of the peak (flat top: the top face)
+  /** m^2 where the height >= half the peak: the outline a measurement draws at half height (induration's
+   *  edge_fraction 0.5), inside the footprint by about half the ramp */
+  double half_height_area = 0;
   double volume = 0;           //!< m^3
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  //!< limb frame, area-weighted mean of the raised surface over the footprint
   Eigen::Vector3d top_point = Eigen::Vector3d::Zero(); //!< limb frame, the raised surface at the plaque centre
@@ -129,13 +132,14 @@ class SkinScene : public Scene {
 
 /**
  * @brief A random limb and plaques for a seed (the `skin` dataset's default): semi-axes 30 ... 60 mm with an
- * aspect (z / y) of 0.8 ... 1, `count` plaques at |phi| <= 60 deg around the top (so some sit on the slanted
+ * aspect (z / y) of 0.8 ... 1, `count` plaques with centres at |phi| <= max_angle (55 deg) around the top (so some sit on the slanted
  * sides) and |s| <= 40 mm, not overlapping, outline radii 4 ... 9 mm, heights log-uniform in [0.1, 1.5] mm
  * (the first in [0.05, 0.1]: one plaque below the detection bar) kept 0.02 mm away from the PASImeter class
  * boundaries (0.125, 0.375, 0.625, 0.875 mm: a class is then decidable within 10 um), ramps 0.5 ... 1.5 mm,
  * flat tops (dome_max > 0: domes up to it), irregularity 0.05 ... 0.25.
  */
-SkinGeometry randomSkinGeometry(std::uint64_t seed, int count = 5, double dome_max = 0.0);
+SkinGeometry randomSkinGeometry(std::uint64_t seed, int count = 5, double dome_max = 0.0,
+                                double max_angle = 55.0 * M_PI / 180.0);
 
 }  // namespace sim
 }  // namespace skin3d

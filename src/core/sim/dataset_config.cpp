@@ -133,7 +133,7 @@ SkinGeometry SkinConfig::geometryFor(std::uint64_t seed, double* y, double* t, d
   *r = roll;
   if (random) {
     try {
-      g = randomSkinGeometry(seed, plaque_count, dome_max);
+      g = randomSkinGeometry(seed, plaque_count, dome_max, sweep.enabled ? sweep.plaque_span : 55.0 * kDeg);
     } catch (const std::runtime_error& e) {
       throw SimConfigError("skin.plaque_count", std::string("field 'skin.plaque_count': ") + e.what());
     }
@@ -163,6 +163,7 @@ void SkinConfig::validate() const {
   if (frames < 1) bad("skin.frames", frames, "must be >= 1");
   if (!(fps > 0) || !std::isfinite(fps)) bad("skin.fps", fps, "must be > 0");
   if (!(contrast >= 0) || contrast > 5) bad("skin.contrast", contrast, "must be in [0, 5]");
+  sweep.validate();
   const double ay = geometry.semi_axis_y, az = geometry.semi_axis_z;
   if (!(ay >= 0.01 && ay <= 0.2) || !(az >= 0.01 && az <= 0.2))
     bad("skin.limb.semi_axes_mm", std::min(ay, az) * 1e3, "must be in [10, 200] mm");
@@ -271,7 +272,7 @@ void readSkin(const Section& top, SkinConfig& k) {
   const Section ks = top.sub("skin", false,
                              {"random", "plaque_count", "dome_max", "limb", "plaques", "ridges", "yaw_deg", "tilt_deg", "roll_deg",
                               "max_yaw_deg", "max_tilt_deg", "max_roll_deg", "working_distance_mm", "resolution_scale",
-                              "frames", "fps", "contrast", "scale_texture"});
+                              "frames", "fps", "contrast", "scale_texture", "sweep"});
   k.random = ks.boolean("random", k.random);
   k.plaque_count = ks.integer("plaque_count", false, k.plaque_count);
   k.dome_max = ks.number("dome_max", false, k.dome_max);
@@ -324,6 +325,23 @@ void readSkin(const Section& top, SkinConfig& k) {
   k.fps = ks.number("fps", false, k.fps);
   k.contrast = ks.number("contrast", false, k.contrast);
   k.scale_texture = ks.boolean("scale_texture", k.scale_texture);
+  const Section sw = ks.sub("sweep", false, {"enabled", "frames", "arc_deg", "fps", "jitter_mm", "jitter_deg",
+                                              "plaque_span_deg", "gyro"});
+  SkinSweepConfig& w = k.sweep;
+  w.enabled = sw.boolean("enabled", w.enabled);
+  w.frames = sw.integer("frames", false, w.frames);
+  w.arc = sw.number("arc_deg", false, w.arc / kDeg) * kDeg;
+  w.fps = sw.number("fps", false, w.fps);
+  w.jitter = sw.number("jitter_mm", false, w.jitter * 1e3) * 1e-3;
+  w.jitter_rot = sw.number("jitter_deg", false, w.jitter_rot / kDeg) * kDeg;
+  w.plaque_span = sw.number("plaque_span_deg", false, w.plaque_span / kDeg) * kDeg;
+  const Section gs = sw.sub("gyro", false, {"rate_hz", "noise_rad_s", "bias_rad_s"});
+  w.gyro_rate = gs.number("rate_hz", false, w.gyro_rate);
+  w.gyro_noise = gs.number("noise_rad_s", false, w.gyro_noise);
+  if (gs.has("bias_rad_s")) {
+    const auto b = gs.list("bias_rad_s", 3, false);
+    w.gyro_bias = Eigen::Vector3d(b[0], b[1], b[2]);
+  }
 
 }
 

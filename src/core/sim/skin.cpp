@@ -71,7 +71,7 @@ SkinScene::SkinScene(SkinGeometry g, std::uint64_t seed) : g_(std::move(g)), see
     if (!(p.ramp > 0) || p.ramp >= p.radii.minCoeff()) bad(n + ".ramp must be > 0 and smaller than the smaller radius");
     if (!(p.dome >= 0 && p.dome <= 1)) bad(n + ".dome must be in [0, 1]");
     if (!(p.irregularity >= 0 && p.irregularity < 0.5)) bad(n + ".irregularity must be in [0, 0.5)");
-    if (std::fabs(p.centre.y() / rm) > 0.45 * kPi) bad(n + ".centre: more than 81 deg around the limb from the top");
+    if (std::fabs(p.centre.y() / rm) > 0.85 * kPi) bad(n + ".centre: more than 153 deg around the limb from the top");
     h_max_ = std::max(h_max_, p.height);
     std::mt19937_64 rng(hash64(seed ^ hash64(p.shape_seed + 77 * k)));
     Eigen::Vector3d amp, ph;
@@ -343,8 +343,10 @@ SkinPlaqueTruth SkinScene::plaqueTruth(std::size_t k, double step) const {
       cen += X * dA;
     }
   t.top_height = peak;
-  for (const auto& [dist, dA] : cells)
+  for (const auto& [dist, dA] : cells) {
     if (dist >= 0.99 * peak) t.top_area += dA;
+    if (dist >= 0.5 * peak) t.half_height_area += dA;
+  }
   if (t.footprint_area > 0) {
     t.mean_height = t.volume / t.footprint_area;
     t.centroid = cen / t.footprint_area;
@@ -352,7 +354,7 @@ SkinPlaqueTruth SkinScene::plaqueTruth(std::size_t k, double step) const {
   return t;
 }
 
-SkinGeometry randomSkinGeometry(std::uint64_t seed, int count, double dome_max) {
+SkinGeometry randomSkinGeometry(std::uint64_t seed, int count, double dome_max, double max_angle) {
   std::mt19937_64 rng(hash64(seed * 0x51ED27ull + 0x5EED));
   SkinGeometry g;
   g.semi_axis_y = uniform(rng, 0.030, 0.060);
@@ -375,7 +377,7 @@ SkinGeometry randomSkinGeometry(std::uint64_t seed, int count, double dome_max) 
     bool placed = false;
     for (int attempt = 0; attempt < 500 && !placed; ++attempt) {
       p.radii = Eigen::Vector2d(uniform(rng, 4e-3, 9e-3), uniform(rng, 4e-3, 9e-3));
-      p.centre = Eigen::Vector2d(uniform(rng, -0.04, 0.04), rm * uniform(rng, -1.0, 1.0) * 55.0 * kPi / 180.0);
+      p.centre = Eigen::Vector2d(uniform(rng, -0.04, 0.04), rm * uniform(rng, -1.0, 1.0) * max_angle);
       placed = true;
       for (const SkinPlaque& q : g.plaques) {
         const double need = (p.radii.maxCoeff() * (1 + p.irregularity) + q.radii.maxCoeff() * (1 + q.irregularity)) + 4e-3;

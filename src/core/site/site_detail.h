@@ -1,0 +1,92 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// Private pieces of the site scan shared by its files (site_fusion.cpp, site_measure.cpp, site_io.cpp) and tests.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "skin3d/site/site_fusion.h"
+
+namespace skin3d {
+namespace site {
+namespace site_detail {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+/** The body surface from a frame's reference (site_fusion.h, 1.); *why says when a quadric was not taken as a limb. */
+SiteSurface surfaceFromReference(const induration::ReferenceSurface& ref, const geometry::DenseCloud& cloud,
+                                 const Eigen::Isometry3d& T_W_C, std::string* why);
+/** Median distance between horizontally neighbouring known points (m); 0 if too few. */
+double medianPixelFootprint(const geometry::DenseCloud& cloud);
+
+/** The fused height field over the body surface (site_fusion.h, 3.). */
+struct FusionGrid {
+  SiteSurface surf;
+  double cell = 0, wref = 0;       // w is stored as w - wref (the cylinder's radius; 0 for a plane)
+  int nu = 0, nv = 0;
+  double umin = 0, vmin = 0;
+  bool periodic = false;
+  std::vector<float> sw;           // sum of weights
+  std::vector<double> swh;         // sum of weight x (w - wref)
+  std::vector<float> sw2v;         // sum of weight^2 x variance (the variance of the cell's mean: sw2v / sw^2)
+  std::vector<std::uint8_t> count, best;
+  std::vector<float> bestw;
+  std::vector<int> last;           // the last frame that touched the cell
+  std::string note;                // why the body surface is what it is, when that needs saying
+  std::size_t idx(int i, int j) const { return static_cast<std::size_t>(j) * nu + i; }
+  bool cellOf(double u, double v, int* i, int* j) const {
+    *i = static_cast<int>(std::floor((u - umin) / cell));
+    *j = static_cast<int>(std::floor((v - vmin) / cell));
+    if (periodic) *j = ((*j % nv) + nv) % nv;
+    return *i >= 0 && *i < nu && *j >= 0 && *j < nv;
+  }
+  /** fused w - wref at (u, v) (nearest cell), its sigma and slopes; false where nothing is fused */
+  bool lookup(double u, double v, double* val, double* sigma, double* su, double* sv) const {
+    int i, j;
+    if (!cellOf(u, v, &i, &j)) return false;
+    const std::size_t k = idx(i, j);
+    if (!(sw[k] > 0)) return false;
+    *val = swh[k] / sw[k];
+    *sigma = 1.0 / std::sqrt(sw[k]);
+    auto at = [&](int ii, int jj, double* out) {
+      if (periodic) jj = ((jj % nv) + nv) % nv;
+      if (ii < 0 || ii >= nu || jj < 0 || jj >= nv) return false;
+      const std::size_t q = idx(ii, jj);
+      if (!(sw[q] > 0)) return false;
+      *out = swh[q] / sw[q];
+      return true;
+    };
+    double a, b;
+    *su = (at(i + 2, j, &a) && at(i - 2, j, &b)) ? (a - b) / (4 * cell) : 0.0;
+    *sv = (at(i, j + 2, &a) && at(i, j - 2, &b)) ? (a - b) / (4 * cell) : 0.0;
+    return true;
+  }
+};
+
+/** The fused field, cropped: value = w - wref (m, NaN unknown), rows v, columns u; cell (0, 0) at (u0, v0). */
+struct FusedMap {
+  SiteSurface surface;
+  double cell = 0, wref = 0, u0 = 0, v0 = 0;
+  cv::Mat value, sigma, frames;  // CV_64F, CV_32F, CV_8U
+};
+
+/** The smooth body model fitted to the fused field (site_fusion.h, 4.). */
+struct BodyModel {
+  std::string name;
+  Eigen::VectorXd coef;
+  double rms = 0;
+  /** model value (w - wref) at (u, v) and its derivatives along u and v */
+  double eval(const SiteSurface& s, double u, double v, double* du = nullptr, double* dv = nullptr) const;
+};
+/** Tukey-weighted fit of the body model to the known cells not in `exclude` (CV_8U, may be empty). */
+BodyModel fitBodyModel(const FusedMap& m, const cv::Mat& exclude);
+
+/** The site measurement on a fused map. */
+SiteResult measureSite(const FusedMap& m, const induration::IndurationOptions& options, const std::vector<SiteFrame>& frames);
+
+}  // namespace site_detail
+}  // namespace site
+}  // namespace skin3d

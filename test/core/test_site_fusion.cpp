@@ -1,0 +1,194 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The site scan's fusion (site/site_fusion.h): its residual's Jacobian, the body surface's coordinates, and an orbit
+// around a rendered limb (geometry from the simulator's SkinScene, truth from its plaqueTruth) fused and measured.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "skin3d/geometry/quaternion.h"
+#include "skin3d/induration/induration.h"
+#include "skin3d/sim/skin.h"
+#include "skin3d/site/site_fusion.h"
+
+using namespace skin3d;  // NOLINT(build/namespaces)
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+/** An orbit of views around a limb: clouds cast through the scene (the truth's geometry), noise along the rays. */
+struct Orbit {
+  sim::SkinScene scene;
+  int width = 480, height = 360;
+  double f = 1400;                 // px: 0.18 mm pixels at 250 mm
+  double baseline = 0.1;           // m, the right camera's centre along x (for the incidence of both cameras)
+  double distance = 0.25;          // m from the skin
+  double noise = 10e-6;            // m along the ray
+  explicit Orbit(const sim::SkinGeometry& g) : scene(g, 7) {}
+  /** the left camera's pose in the limb frame, looking at the limb from angle a around its axis */
+  Eigen::Isometry3d pose(double a) const {
+    const Eigen::Vector3d out(0, std::sin(a), std::cos(a));  // from the axis towards the camera
+    const double r = scene.geometry().meanRadius();
+    Eigen::Matrix3d R;
+    const Eigen::Vector3d z = -out, x = Eigen::Vector3d::UnitX(), y = z.cross(x);
+    R.col(0) = x;
+    R.col(1) = y;
+    R.col(2) = z;
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = R;
+    T.translation() = (r + distance) * out;
+    return T;
+  }
+  geometry::DenseCloud cloud(const Eigen::Isometry3d& T_W_C, std::uint64_t seed) const {
+    geometry::DenseCloud c;
+    c.xyz.create(height, width, CV_32FC3);
+    c.sigma.create(height, width, CV_32F);
+    c.ray.create(height, width, CV_32FC3);
+    c.right_centre = cv::Vec3d(baseline, 0, 0);
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> n01(0, 1);
+    sim::Hit hit;
+    for (int v = 0; v < height; ++v)
+      for (int u = 0; u < width; ++u) {
+        const Eigen::Vector3d ray = Eigen::Vector3d((u - 0.5 * width) / f, (v - 0.5 * height) / f, 1).normalized();
+        c.ray.at<cv::Vec3f>(v, u) = cv::Vec3f(ray.x(), ray.y(), ray.z());
+        const bool ok = scene.intersect(T_W_C.translation(), T_W_C.linear() * ray, &hit);
+        const double cl = ok ? -hit.normal.dot(T_W_C.linear() * ray) : 0;
+        if (!ok || cl < std::cos(75 * kDeg)) {
+          c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(NAN, NAN, NAN);
+          c.sigma.at<float>(v, u) = NAN;
+          continue;
+        }
+        const double t = hit.distance + noise * n01(rng);
+        const Eigen::Vector3d X = t * ray;
+        c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(X.x(), X.y(), X.z());
+        c.sigma.at<float>(v, u) = static_cast<float>(noise);
+      }
+    return c;
+  }
+};
+
+sim::SkinGeometry limbWithThreePlaques() {
+  sim::SkinGeometry g;
+  g.semi_axis_y = 0.045;
+  g.semi_axis_z = 0.040;
+  const double rm = g.meanRadius();
+  const double heights[3] = {0.3e-3, 0.6e-3, 1.0e-3}, angles[3] = {-65 * kDeg, 0.0, 70 * kDeg};
+  for (int k = 0; k < 3; ++k) {
+    sim::SkinPlaque p;
+    p.centre = Eigen::Vector2d(0.004 * (k - 1), rm * angles[k]);
+    p.radii = Eigen::Vector2d(0.007, 0.0055);
+    p.height = heights[k];
+    p.ramp = 0.8e-3;
+    p.irregularity = 0.1;
+    p.shape_seed = 11 + k;
+    g.plaques.push_back(p);
+  }
+  return g;
+}
+
+}  // namespace
+
+TEST(SiteFusion, PointToPlaneJacobianMatchesNumericalDifferences) {
+  const Eigen::Vector3d X(0.03, -0.02, 0.25), P(0.031, -0.018, 0.2495), n = Eigen::Vector3d(0.2, -0.3, 0.9).normalized();
+  Eigen::Matrix<double, 1, 6> J;
+  site::pointToPlane(X, P, n, &J);
+  const double h = 1e-7;
+  for (int k = 0; k < 6; ++k) {
+    Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
+    d[k] = h;
+    auto moved = [&](double s) {
+      return Eigen::Vector3d(geometry::so3Exp(s * d.head<3>()) * X + s * d.tail<3>());
+    };
+    const double num = (site::pointToPlane(moved(1), P, n, nullptr) - site::pointToPlane(moved(-1), P, n, nullptr)) / (2 * h);
+    EXPECT_NEAR(J[k], num, 1e-7) << "column " << k;
+  }
+}
+
+TEST(SiteFusion, SurfaceCoordinatesRoundTrip) {
+  site::SiteSurface c;
+  c.model = "cylinder";
+  c.origin = Eigen::Vector3d(0.01, 0.02, 0.3);
+  c.axis = Eigen::Vector3d(1, 0.2, 0.1).normalized();
+  c.e1 = c.axis.cross(Eigen::Vector3d::UnitZ()).normalized();
+  c.e2 = c.axis.cross(c.e1);
+  c.radius = 0.04;
+  site::SiteSurface p = c;
+  p.model = "plane";
+  for (const auto* s : {&c, &p})
+    for (const Eigen::Vector3d& X : {Eigen::Vector3d(0.02, 0.05, 0.31), Eigen::Vector3d(-0.03, -0.01, 0.27)}) {
+      EXPECT_LT((s->toWorld(s->toSurface(X)) - X).norm(), 1e-12) << s->model;
+    }
+}
+
+TEST(SiteFusion, AnOrbitIsFusedAndEachPlaqueMeasuredOnce) {
+  const Orbit orbit(limbWithThreePlaques());
+  induration::IndurationOptions io;
+  site::SiteFusion fusion(site::SiteOptions(), io);
+  // world = the first view's camera frame; poses given with errors a SLAM would leave (the registration removes them)
+  const double angles[] = {-50, -33, -17, 0, 17, 33, 50};
+  const Eigen::Isometry3d T_limb_C0 = orbit.pose(angles[0] * kDeg), T_C0_limb = T_limb_C0.inverse();
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n01(0, 1);
+  for (int k = 0; k < 7; ++k) {
+    const Eigen::Isometry3d T_limb_C = orbit.pose(angles[k] * kDeg);
+    const geometry::DenseCloud cloud = orbit.cloud(T_limb_C, 100 + k);
+    const induration::IndurationResult own = induration::measureInduration(cloud, io);
+    Eigen::Isometry3d given = T_C0_limb * T_limb_C;
+    if (k > 0) {
+      Eigen::Isometry3d err = Eigen::Isometry3d::Identity();
+      err.linear() = geometry::so3Exp(Eigen::Vector3d(n01(rng), n01(rng), n01(rng)) * 1e-3);
+      err.translation() = Eigen::Vector3d(n01(rng), n01(rng), n01(rng)) * 0.2e-3;
+      given = given * err;
+    }
+    const site::SiteFrame& f = fusion.add(cloud, own, given, k * 0.25);
+    ASSERT_TRUE(f.fused) << "frame " << k << ": " << f.reason;
+    if (k > 0) {
+      EXPECT_LT(f.seam_excess, 5e-6) << "frame " << k << " disagrees with the site after registration (" << f.seam_rms * 1e6
+                                      << " um RMS, " << f.seam_noise * 1e6 << " um from the noise)";
+    }
+  }
+  const site::SiteResult r = fusion.measure();
+  EXPECT_EQ(r.surface.model, "cylinder");
+  for (const auto& w : r.warnings) std::printf("warning: %s\n", w.c_str());
+  std::printf("body %s scatter %.1f um; unrolled %s rms %.1f um, threshold %.3f mm, smoothing %.1f px\n", r.body_model.c_str(), r.body_rms * 1e6,
+              r.flat.reference.model.c_str(), r.flat.reference.rms * 1e6, r.flat.detection_threshold * 1e3, r.flat.smoothing_px);
+  ASSERT_EQ(r.plaques.size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) {
+    const sim::SkinPlaqueTruth t = orbit.scene.plaqueTruth(k);
+    const Eigen::Vector3d c = T_C0_limb * t.centroid;
+    const site::SitePlaque* m = nullptr;
+    for (const auto& p : r.plaques)
+      if ((p.centroid - c).norm() < 3e-3) m = &p;
+    ASSERT_NE(m, nullptr) << "plaque " << k << " not found where it is";
+    EXPECT_NEAR(m->top_height, t.top_height, 10e-6) << "plaque " << k;
+    // the outline is drawn at half height (induration's edge_fraction 0.5): its area is the truth's at half height
+    EXPECT_NEAR(m->area, t.half_height_area, 0.05 * t.half_height_area) << "plaque " << k;
+    EXPECT_NEAR(m->volume, t.volume, 0.10 * t.volume) << "plaque " << k;
+    EXPECT_GE(m->views, 1) << "plaque " << k;
+  }
+}
+
+TEST(SiteFusion, AFrameThatDoesNotOverlapIsLeftOutAndNamed) {
+  const Orbit orbit(limbWithThreePlaques());
+  induration::IndurationOptions io;
+  site::SiteFusion fusion(site::SiteOptions(), io);
+  const Eigen::Isometry3d T0 = orbit.pose(0);
+  const geometry::DenseCloud c0 = orbit.cloud(T0, 1);
+  ASSERT_TRUE(fusion.add(c0, induration::measureInduration(c0, io), Eigen::Isometry3d::Identity(), 0).fused);
+  // the next view said to be 60 mm along the limb: nothing of it falls on the fused site
+  const geometry::DenseCloud c1 = orbit.cloud(T0, 2);
+  Eigen::Isometry3d far = Eigen::Isometry3d::Identity();
+  far.translation() = T0.inverse().linear() * Eigen::Vector3d(0.3, 0, 0);
+  const site::SiteFrame& f = fusion.add(c1, induration::measureInduration(c1, io), far, 0.25);
+  EXPECT_FALSE(f.fused);
+  EXPECT_NE(f.reason.find("overlaps the fused site"), std::string::npos) << f.reason;
+  // an empty cloud
+  const site::SiteFrame& e = fusion.add(geometry::DenseCloud(), induration::IndurationResult(), Eigen::Isometry3d::Identity(), 0.5);
+  EXPECT_FALSE(e.fused);
+  EXPECT_FALSE(e.reason.empty());
+  const site::SiteResult r = fusion.measure();
+  EXPECT_EQ(r.frames_fused, 1);
+  EXPECT_EQ(r.frames_left_out, 2);
+}

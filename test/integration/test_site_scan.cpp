@@ -1,0 +1,123 @@
+// SPDX-License-Identifier: BSD-3-Clause
+// The site scan end to end: a reduced hand-held sweep (make_dataset skin with skin.sweep: half resolution, 7 pairs
+// over +-60 deg, hand jitter, calibration error and noise) measured by process_bag --site with the dataset's poses,
+// checked against the generator's truth. Bars for this reduced sweep (half the pixels: about twice the height noise
+// of the full-resolution sweep the benchmarks measure): every frame fused; every true plaque of at least 0.2 mm
+// that some frame sees within 45 deg found exactly once, its top within max(20 um, 3 x its stated sigma), its PASI
+// class right; no site plaque that no true plaque claims; >= 95 % of the skin some frame sees within 45 deg in both
+// cameras has a fused height. And the bad inputs: no pose topic, a pose topic of the wrong type.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+const std::string kMakeDataset = SKIN3D_MAKE_DATASET_BIN;
+const std::string kProcessBag = SKIN3D_PROCESS_BAG_BIN;
+
+int run(const std::string& cmd) {
+  std::printf("$ %s\n", cmd.c_str());
+  std::fflush(stdout);
+  const int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+Eigen::Vector3d vec(const YAML::Node& n) { return Eigen::Vector3d(n[0].as<double>(), n[1].as<double>(), n[2].as<double>()); }
+
+int pasi(double mm) {
+  int k = 0;
+  for (double b : {0.125, 0.375, 0.625, 0.875}) k += mm >= b;
+  return k;
+}
+
+class SiteScan : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = ::testing::TempDir() + "skin3d_site_scan";
+    bag_ = dir_ + "/sweep.bag";
+    out_ = dir_ + "/results";
+    ASSERT_EQ(run("rm -rf " + dir_ + " && mkdir -p " + dir_), 0);
+    std::ofstream(dir_ + "/sweep.yaml") << "skin:\n  plaque_count: 6\n  resolution_scale: 0.5\n"
+                                           "  sweep: {enabled: true, frames: 7, arc_deg: 120, fps: 2, plaque_span_deg: 80}\n";
+    ASSERT_EQ(run(kMakeDataset + " skin --config " + dir_ + "/sweep.yaml --seed 11 --out " + bag_ + " --quiet"), 0);
+    status_ = run(kProcessBag + " --site --site-poses ground_truth/pose --bag " + bag_ + " --out " + out_ + " --quiet");
+  }
+  static std::string dir_, bag_, out_;
+  static int status_;
+};
+std::string SiteScan::dir_, SiteScan::bag_, SiteScan::out_;
+int SiteScan::status_ = -1;
+
+TEST_F(SiteScan, EveryPlaqueSeenWellIsMeasuredOnce) {
+  ASSERT_EQ(status_, 0);
+  const YAML::Node truth = YAML::LoadFile(dir_ + "/sweep.truth.yaml");
+  const YAML::Node site = YAML::LoadFile(out_ + "/site.yaml");
+  EXPECT_EQ(site["frames_fused"].as<int>(), 7);
+  EXPECT_EQ(site["frames_left_out"].as<int>(), 0);
+  EXPECT_EQ(site["surface"]["model"].as<std::string>(), "cylinder");
+  const YAML::Node measured = site["plaques"];
+  std::vector<int> claimed(measured.size(), 0);
+  int required = 0;
+  for (std::size_t i = 0; i < truth["plaques"].size(); ++i) {
+    const YAML::Node p = truth["plaques"][i];
+    const double top = p["height_mm"].as<double>();
+    const double best_inc = truth["plaques_seen"][i]["best_incidence_deg"].as<double>();
+    const double reach = std::max(3e-3, std::sqrt(p["area_mm2"].as<double>() / M_PI) * 1e-3);
+    int match = -1, n = 0;
+    for (std::size_t j = 0; j < measured.size(); ++j)
+      if ((vec(measured[j]["centroid_m"]) - vec(p["centroid_left_m"])).norm() <= reach) {
+        ++claimed[j];
+        ++n;
+        match = static_cast<int>(j);
+      }
+    if (top < 0.2 || best_inc > 45) continue;
+    ++required;
+    ASSERT_EQ(n, 1) << "true plaque " << i << " (" << top << " mm, best incidence " << best_inc << " deg) is matched by " << n
+                    << " site plaques";
+    const YAML::Node m = measured[match];
+    const double err = m["top_height_mm"].as<double>() - top, sig = m["top_height_sigma_mm"].as<double>();
+    EXPECT_LE(std::fabs(err), std::max(0.020, 3 * sig)) << "plaque " << i << ": top " << m["top_height_mm"].as<double>()
+                                                       << " mm against " << top << " (sigma " << sig << ")";
+    EXPECT_EQ(m["pasi"].as<int>(), pasi(top)) << "plaque " << i;
+    EXPECT_GE(m["views"].as<int>(), 1) << "plaque " << i;
+  }
+  EXPECT_GE(required, 2) << "the sweep must hold plaques to measure";
+  for (std::size_t j = 0; j < measured.size(); ++j)
+    EXPECT_GE(claimed[j], 1) << "site plaque " << measured[j]["id"].as<int>() << " at "
+                             << vec(measured[j]["centroid_m"]).transpose() << " is no true plaque";
+}
+
+TEST_F(SiteScan, TheSkinTheFramesSeeIsFused) {
+  ASSERT_EQ(status_, 0);
+  // the coverage check of scripts/site_check.py, which reads the truth's coverage image and site_surface.ply
+  const std::string js = dir_ + "/check.json";
+  ASSERT_EQ(run("/usr/bin/python3 " + std::string(SKIN3D_SOURCE_DIR) + "/scripts/site_check.py " + bag_ + " " + out_ +
+                " --json " + js),
+            0);
+  const YAML::Node r = YAML::LoadFile(js);  // JSON is YAML
+  EXPECT_GE(r["coverage"].as<double>(), 0.95);
+}
+
+TEST_F(SiteScan, WithoutPosesItSaysWhatIsMissing) {
+  ASSERT_EQ(status_, 0);
+  // the default pose topic (slam/odometry) is not in a simulated sweep: exit 1 naming it and --site-poses
+  const std::string log = dir_ + "/noposes.log";
+  EXPECT_EQ(run(kProcessBag + " --site --bag " + bag_ + " --out " + dir_ + "/noposes --quiet --frames 1 2> " + log), 1);
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("slam/odometry"), std::string::npos) << text;
+  EXPECT_NE(text.find("--site-poses"), std::string::npos) << text;
+  // a topic that holds no pose
+  EXPECT_EQ(run(kProcessBag + " --site --site-poses stereo/left/camera_info --bag " + bag_ + " --out " + dir_ +
+                "/badposes --quiet --frames 1"),
+            1);
+}
+
+}  // namespace

@@ -2,6 +2,7 @@
 // The site's results (docs/results.md "Site"): site.yaml, site_height_map.png, site_coverage.png, site_surface.ply.
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -164,7 +165,15 @@ void writeSiteResults(const std::string& dir, const SiteResult& r, const std::ve
   if (!f) throw std::runtime_error("cannot write " + yaml);
   if (!r.height.empty()) {
     const std::string png = dir + "/site_height_map.png";
-    if (!cv::imwrite(png, induration::heightMapImage(r.height, r.labels, r.flat.plaques, 0.0, 1600, r.flat.unfollowed)))
+    // the picture outlines the site's plaques; regions never seen within 45 deg are listed in site.yaml, not drawn
+    std::vector<induration::Plaque> shown;
+    cv::Mat labels = r.labels.clone();
+    for (const auto& p : r.flat.plaques) {
+      const bool kept = std::any_of(r.plaques.begin(), r.plaques.end(), [&](const SitePlaque& q) { return q.id == p.id; });
+      if (kept) shown.push_back(p);
+      else labels.setTo(0, r.labels == p.id);
+    }
+    if (!cv::imwrite(png, induration::heightMapImage(r.height, labels, shown, 0.0, 1600, r.flat.unfollowed)))
       throw std::runtime_error("cannot write " + png);
     const std::string cov = dir + "/site_coverage.png";
     if (!cv::imwrite(cov, coverageImage(r.frames))) throw std::runtime_error("cannot write " + cov);

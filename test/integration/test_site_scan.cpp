@@ -5,7 +5,8 @@
 // of the full-resolution sweep the benchmarks measure): every frame fused; every true plaque of at least 0.2 mm
 // that some frame sees within 45 deg found exactly once, its top within max(20 um, 3 x its stated sigma), its PASI
 // class right; no site plaque that no true plaque claims; >= 95 % of the skin some frame sees within 45 deg in both
-// cameras has a fused height. And the bad inputs: no pose topic, a pose topic of the wrong type.
+// cameras has a fused height. And the bad inputs: no pose topic, a pose topic of the wrong type, a sweep whose pairs
+// never overlap (exit status 5, each pair named, the results written).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <yaml-cpp/yaml.h>
@@ -118,6 +119,28 @@ TEST_F(SiteScan, WithoutPosesItSaysWhatIsMissing) {
   EXPECT_EQ(run(kProcessBag + " --site --site-poses stereo/left/camera_info --bag " + bag_ + " --out " + dir_ +
                 "/badposes --quiet --frames 1"),
             1);
+}
+
+TEST_F(SiteScan, ASweepThatNeverOverlapsSaysSoAndExitsFive) {
+  ASSERT_EQ(status_, 0);
+  // the same pairs with their poses moved apart: pair k half a metre further along world x than pair k - 1
+  const std::string script = dir_ + "/apart.py", apart = dir_ + "/apart.bag", out = dir_ + "/apart";
+  std::ofstream(script) << "import sys, rosbag\n"
+                           "k = 0\n"
+                           "with rosbag.Bag(sys.argv[2], 'w') as o:\n"
+                           "    for topic, msg, t in rosbag.Bag(sys.argv[1]).read_messages():\n"
+                           "        if topic.lstrip('/') == 'ground_truth/pose':\n"
+                           "            msg.pose.position.x += 0.5 * k\n"
+                           "            k += 1\n"
+                           "        o.write(topic, msg, t)\n";
+  ASSERT_EQ(run("/usr/bin/python3 " + script + " " + bag_ + " " + apart), 0);
+  EXPECT_EQ(run(kProcessBag + " --site --site-poses ground_truth/pose --bag " + apart + " --out " + out + " --frames 3 --quiet"), 5);
+  const YAML::Node site = YAML::LoadFile(out + "/site.yaml");  // written all the same
+  EXPECT_EQ(site["frames_fused"].as<int>(), 1);
+  EXPECT_EQ(site["frames_left_out"].as<int>(), 2);
+  for (std::size_t k = 1; k < site["frames"].size(); ++k)
+    EXPECT_NE(site["frames"][k]["left_out"].as<std::string>("").find("overlaps the fused site"), std::string::npos)
+        << "pair " << k << " must be named with the reason";
 }
 
 }  // namespace

@@ -13,9 +13,11 @@
 
 #include <Eigen/Geometry>
 #include <string>
+#include <vector>
 
 #include "skin3d/geometry/stereo_rig.h"
 #include "skin3d/sim/dataset.h"
+#include "skin3d/stereo/rectification.h"
 
 namespace make_dataset_detail {
 
@@ -48,6 +50,13 @@ int makeSkin(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, 
  *  the swept-skin coverage truth to `visible_path`. */
 int makeSkinSweep(const skin3d::sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
                   const std::string& visible_path);
+/** The rectification of a skin dataset (make_dataset_scenes.cpp): fitted to the skin both cameras see, under the true
+ *  rig and the calibrated one, from every pose in T_L_W (limb -> left optical frame), |phi| <= phi_max around the
+ *  limb. @throws SimConfigError(field) when too little skin is seen or the rectification fails. */
+skin3d::stereo::RectifiedPair rectifyForSkin(const skin3d::sim::SkinScene& scene, const skin3d::geometry::StereoRig& true_rig,
+                                             const skin3d::geometry::StereoRig& calib_rig,
+                                             const std::vector<Eigen::Isometry3d>& T_L_W, double phi_max,
+                                             const std::string& field, double working_distance);
 /** The limb and its plaques' truth (make_dataset_scenes.cpp), points in the frame T_L_W maps the limb frame to. */
 void emitSkinTruth(YAML::Emitter& truth, const skin3d::sim::SkinScene& scene, const Eigen::Isometry3d& T_L_W);
 

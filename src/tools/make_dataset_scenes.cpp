@@ -273,6 +273,33 @@ void emitSkinTruth(YAML::Emitter& truth, const sim::SkinScene& scene, const Eige
   truth << YAML::EndSeq;
 }
 
+stereo::RectifiedPair rectifyForSkin(const sim::SkinScene& scene, const geometry::StereoRig& true_rig,
+                                     const geometry::StereoRig& calib_rig, const std::vector<Eigen::Isometry3d>& T_L_W,
+                                     double phi_max, const std::string& field, double working_distance) {
+  // points of interest: skin both cameras see, under the true rig and under the calibration the rectification uses
+  // (a point at an image border may be inside under one and outside under the other: the rectification refuses it)
+  const sim::SkinGeometry& g = scene.geometry();
+  std::vector<Eigen::Vector3d> poi;
+  auto seen = [](const geometry::StereoRig& rig, const Eigen::Vector3d& X) {
+    Eigen::Vector2d uvl, uvr;
+    return rig.project(X, &uvl, &uvr) && rig.left().inImage(uvl) && rig.right().inImage(uvr);
+  };
+  for (const Eigen::Isometry3d& T : T_L_W)
+    for (double s = -0.5 * g.length; s <= 0.5 * g.length; s += 0.01)
+      for (double phi = -phi_max; phi <= phi_max; phi += 0.1) {
+        const Eigen::Vector3d X = T * scene.surfacePoint(s, phi);
+        if (seen(true_rig, X) && seen(calib_rig, X)) poi.push_back(X);
+      }
+  if (poi.size() < 10)
+    throw sim::SimConfigError(field, "the limb is not in both camera images at working distance " +
+                                         std::to_string(working_distance * 1e3) + " mm");
+  try {
+    return stereo::rectifyStereo(calib_rig, poi);
+  } catch (const std::runtime_error& e) {
+    throw sim::SimConfigError(field, e.what());
+  }
+}
+
 int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Emitter& truth, bool quiet,
              const std::string& visible_path) {
   const sim::SkinConfig& k = c.skin;
@@ -284,42 +311,12 @@ int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Em
   const sim::SkinScene scene(k.geometryFor(c.seed, &yaw, &tilt, &roll), c.seed);
   const sim::SkinGeometry& g = scene.geometry();
 
-  // World = limb frame. The rig looks at the top of the limb (rolled about its axis), the baseline along the
-  // limb turned by yaw about the rig axis, the rig axis tilted by `tilt` along the limb.
-  const Eigen::Matrix3d R = (Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitY()) *
-                             Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()))
-                                .toRotationMatrix();
-  const Eigen::Vector3d zaxis = R.col(2);  // from the rig towards the limb
-  const Eigen::Vector2d u = Eigen::Vector2d(-zaxis.y(), -zaxis.z()).normalized();
-  const double tc = 1.0 / std::hypot(u.x() / g.semi_axis_y, u.y() / g.semi_axis_z);
-  const Eigen::Vector3d target(0.0, tc * u.x(), tc * u.y());
-  Eigen::Isometry3d T_W_rig = Eigen::Isometry3d::Identity();
-  T_W_rig.linear() = R;
-  T_W_rig.translation() = target - k.working_distance * zaxis;
+  // World = limb frame (sim::skinRigPose places the rig).
+  const Eigen::Isometry3d T_W_rig = sim::skinRigPose(g, yaw, tilt, roll, k.working_distance);
+  const Eigen::Matrix3d R = T_W_rig.linear();
   const Eigen::Isometry3d T_W_L = T_W_rig * rc.poseRigLeft();
   const Eigen::Isometry3d T_L_W = T_W_L.inverse();
-  // points of interest for the rectification: skin both cameras see, under the true rig and under the
-  // calibration the rectification uses (a point at an image border may be inside under one and outside under
-  // the other: the rectification refuses such a point)
-  std::vector<Eigen::Vector3d> poi;
-  auto seen = [](const geometry::StereoRig& rig, const Eigen::Vector3d& X) {
-    Eigen::Vector2d uvl, uvr;
-    return rig.project(X, &uvl, &uvr) && rig.left().inImage(uvl) && rig.right().inImage(uvr);
-  };
-  for (double s = -0.5 * g.length; s <= 0.5 * g.length; s += 0.01)
-    for (double phi = -1.4; phi <= 1.4; phi += 0.1) {
-      const Eigen::Vector3d X = T_L_W * scene.surfacePoint(s, phi);
-      if (seen(true_rig, X) && seen(calib.rig, X)) poi.push_back(X);
-    }
-  if (poi.size() < 10)
-    throw sim::SimConfigError("skin", "the limb is not in both camera images at working distance " +
-                                          std::to_string(k.working_distance * 1e3) + " mm");
-  stereo::RectifiedPair info;
-  try {
-    info = stereo::rectifyStereo(calib.rig, poi);
-  } catch (const std::runtime_error& e) {
-    throw sim::SimConfigError("skin", e.what());
-  }
+  const stereo::RectifiedPair info = rectifyForSkin(scene, true_rig, calib.rig, {T_L_W}, 1.4, "skin", k.working_distance);
   sim::RenderOptions ro;
   ro.supersample = c.images.supersample;
   ro.light_dir = (R * Eigen::Vector3d(0.15, -0.25, 1.0)).normalized();  // a light beside the rig

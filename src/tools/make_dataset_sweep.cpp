@@ -89,28 +89,10 @@ int makeSkinSweep(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAM
   const Eigen::Isometry3d T_L0_W = T_W_L[0].inverse();  // world of the dataset = the first left optical frame
 
   // One rectification for the sweep, from the skin both cameras see in any frame.
-  std::vector<Eigen::Vector3d> poi;
-  auto seen = [](const geometry::StereoRig& rig, const Eigen::Vector3d& X) {
-    Eigen::Vector2d uvl, uvr;
-    return rig.project(X, &uvl, &uvr) && rig.left().inImage(uvl) && rig.right().inImage(uvr);
-  };
-  for (int i = 0; i < w.frames; ++i) {
-    const Eigen::Isometry3d T_L_W = T_W_L[i].inverse();
-    for (double s = -0.5 * g.length; s <= 0.5 * g.length; s += 0.01)
-      for (double phi = -M_PI; phi < M_PI; phi += 0.1) {
-        const Eigen::Vector3d X = T_L_W * scene.surfacePoint(s, phi);
-        if (seen(true_rig, X) && seen(calib.rig, X)) poi.push_back(X);
-      }
-  }
-  if (poi.size() < 10)
-    throw sim::SimConfigError("skin.sweep", "the limb is not in both camera images at working distance " +
-                                                std::to_string(k.working_distance * 1e3) + " mm");
-  stereo::RectifiedPair info;
-  try {
-    info = stereo::rectifyStereo(calib.rig, poi);
-  } catch (const std::runtime_error& e) {
-    throw sim::SimConfigError("skin.sweep", e.what());
-  }
+  std::vector<Eigen::Isometry3d> T_L_Ws;
+  for (const Eigen::Isometry3d& T : T_W_L) T_L_Ws.push_back(T.inverse());
+  const stereo::RectifiedPair info =
+      rectifyForSkin(scene, true_rig, calib.rig, T_L_Ws, M_PI, "skin.sweep", k.working_distance);
 
   // The pairs, each at its own pose; the light moves with the rig.
   sim::RenderOptions ro;

@@ -33,6 +33,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -138,6 +139,13 @@ class SkinScene : public Scene {
  * boundaries (0.125, 0.375, 0.625, 0.875 mm: a class is then decidable within 10 um), ramps 0.5 ... 1.5 mm,
  * flat tops (dome_max > 0: domes up to it), irregularity 0.05 ... 0.25.
  */
+/**
+ * @brief Where the `skin` dataset puts the rig (its midpoint frame, in the limb frame): looking at the top of the limb
+ * rolled by `roll` about its axis, the baseline along the limb turned by `yaw` about the rig axis, the rig axis
+ * tilted by `tilt` along the limb, and meeting the skin at `working_distance` (m) from the rig's midpoint.
+ */
+Eigen::Isometry3d skinRigPose(const SkinGeometry& g, double yaw, double tilt, double roll, double working_distance);
+
 SkinGeometry randomSkinGeometry(std::uint64_t seed, int count = 5, double dome_max = 0.0,
                                 double max_angle = 55.0 * M_PI / 180.0);
 

@@ -354,6 +354,19 @@ SkinPlaqueTruth SkinScene::plaqueTruth(std::size_t k, double step) const {
   return t;
 }
 
+Eigen::Isometry3d skinRigPose(const SkinGeometry& g, double yaw, double tilt, double roll, double working_distance) {
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(kPi, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()))
+                                .toRotationMatrix();
+  const Eigen::Vector3d zaxis = R.col(2);  // from the rig towards the limb
+  const Eigen::Vector2d u = Eigen::Vector2d(-zaxis.y(), -zaxis.z()).normalized();
+  const double tc = 1.0 / std::hypot(u.x() / g.semi_axis_y, u.y() / g.semi_axis_z);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = R;
+  T.translation() = Eigen::Vector3d(0.0, tc * u.x(), tc * u.y()) - working_distance * zaxis;
+  return T;
+}
+
 SkinGeometry randomSkinGeometry(std::uint64_t seed, int count, double dome_max, double max_angle) {
   std::mt19937_64 rng(hash64(seed * 0x51ED27ull + 0x5EED));
   SkinGeometry g;

@@ -45,19 +45,7 @@ SkinSweepPath::SkinSweepPath(const SkinGeometry& g, const SkinSweepConfig& c, do
 }
 
 Eigen::Isometry3d SkinSweepPath::arcPose(double a) const {
-  // as the single-view skin dataset (make_dataset skin) places the rig, with the limb rolled by roll0 + a
-  const double roll = roll0_ + a;
-  const Eigen::Matrix3d R = (Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(tilt_, Eigen::Vector3d::UnitY()) *
-                             Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(yaw_, Eigen::Vector3d::UnitZ()))
-                                .toRotationMatrix();
-  const Eigen::Vector3d zaxis = R.col(2);
-  const Eigen::Vector2d u = Eigen::Vector2d(-zaxis.y(), -zaxis.z()).normalized();
-  const double tc = 1.0 / std::hypot(u.x() / g_.semi_axis_y, u.y() / g_.semi_axis_z);
-  const Eigen::Vector3d target(0.0, tc * u.x(), tc * u.y());
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = R;
-  T.translation() = target - wd_ * zaxis;
-  return T;
+  return skinRigPose(g_, yaw_, tilt_, roll0_ + a, wd_);  // the single-view skin dataset's rig, the limb rolled by a
 }
 
 Eigen::Isometry3d SkinSweepPath::poseWorldRig(double t) const {

@@ -204,22 +204,22 @@ SiteResult measureSite(const FusedMap& m, const induration::IndurationOptions& o
     s.id = p.id;
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
     double st = 0, uu = 0, vv = 0;
-    int n = 0;
-    for (int j = 0; j < H; ++j)
-      for (int i = 0; i < W; ++i) {
+    int n = 0, known = 0;
+    const cv::Rect box = p.bbox & cv::Rect(0, 0, W, H);  // the plaque's labels lie in its box
+    for (int j = box.y; j < box.y + box.height; ++j)
+      for (int i = box.x; i < box.x + box.width; ++i) {
         if (r.labels.at<int>(j, i) != p.id) continue;
         st += stretch.at<float>(j, i);
         uu += i;
         vv += j;
         ++n;
         const cv::Vec3f& X = r.world_xyz.at<cv::Vec3f>(j, i);
-        if (std::isfinite(X[0])) c += Eigen::Vector3d(X[0], X[1], X[2]);
+        if (std::isfinite(X[0])) {
+          c += Eigen::Vector3d(X[0], X[1], X[2]);
+          ++known;
+        }
       }
     if (n == 0) continue;
-    int known = 0;
-    for (int j = 0; j < H; ++j)
-      for (int i = 0; i < W; ++i)
-        if (r.labels.at<int>(j, i) == p.id && std::isfinite(r.world_xyz.at<cv::Vec3f>(j, i)[0])) ++known;
     s.centroid = known > 0 ? Eigen::Vector3d(c / known) : Eigen::Vector3d::Zero();
     const double factor = st / n;
     s.top_height = p.top_height;

@@ -22,12 +22,14 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 
 #include "skin3d/common/cli.h"
 #include "skin3d/induration/induration_config.h"
 #include "skin3d/site/site_fusion.h"
 #include "skin3d/ros/bag_topics.h"
 #include "skin3d/ros/induration_runner.h"
+#include "skin3d/ros/site_runner.h"
 #include "skin3d/ros/stereo_pairs.h"
 
 namespace skin3d {
@@ -64,23 +66,10 @@ void printTable(const induration::FrameMeasurement& last, int frames, int droppe
   std::printf("results: %s (induration.yaml, height_map.png, surface.ply)\n", out.c_str());
 }
 
-/** The site options from --set site_*=value (documented in process_bag's usage and docs/site.md). */
+/** The site options: config/site.yaml's defaults, then the site_* keys of --set. */
 site::SiteOptions siteOptions(const std::vector<std::pair<std::string, std::string>>& sets) {
   site::SiteOptions o;
-  for (const auto& [k, v] : sets) {
-    auto num = [&](double min) { return common::parseNumber(k, v, min, false); };
-    if (k == "site_cell_mm") o.cell = num(0) * 1e-3;
-    else if (k == "site_max_incidence_deg") o.max_incidence_deg = num(0);
-    else if (k == "site_register") {
-      if (v != "true" && v != "false") throw std::invalid_argument("site_register must be true or false (got '" + v + "')");
-      o.register_frames = v == "true";
-    } else if (k == "site_register_stride") o.register_stride = static_cast<int>(common::parseWholeNumber(k, v, 1, 64));
-    else if (k == "site_min_overlap") o.min_overlap = num(0);
-    else if (k == "site_max_correction_mm") o.max_correction = num(0) * 1e-3;
-    else
-      throw std::invalid_argument("unknown site option '" + k + "' (site_cell_mm, site_max_incidence_deg, site_register, "
-                                  "site_register_stride, site_min_overlap, site_max_correction_mm)");
-  }
+  for (const auto& [k, v] : sets) site::setSiteOption(&o, k, v);
   o.validate();
   return o;
 }
@@ -112,6 +101,18 @@ std::map<double, Eigen::Isometry3d> readPoses(const rosbag::Bag& bag, const std:
   return out;
 }
 
+void printSiteFrame(const site::SiteFrame& f) {
+  if (f.fused)
+    std::printf("  site: frame %d fused, %ld samples (overlap %.0f %%; seams over %d blocks %.1f um RMS, %.1f um beyond the "
+                "noise, rigid part %.1f um; registration moved it %.3f mm in %d iterations; %.1f s registration, %.1f s "
+                "fusion)\n",
+                f.index, f.samples, 100 * f.overlap, f.seam_blocks, f.seam_rms * 1e6, f.seam_excess * 1e6,
+                f.seam_rigid * 1e6, f.correction_rms * 1e3, f.registration_iterations, f.seconds_register, f.seconds_fuse);
+  else
+    std::printf("  site: frame %d left out: %s\n", f.index, f.reason.c_str());
+  std::fflush(stdout);
+}
+
 void printSite(const site::SiteResult& r, const std::string& out) {
   std::printf("\nsite: %d frame(s) fused, %d left out; surface %s (cell %.0f um, %.0f mm^2 fused), seams %.1f um RMS "
               "(%.1f um beyond the noise, rigid part %.1f um); measured in %.1f s\n",
@@ -139,7 +140,20 @@ int runInduration(const IndurationRun& a) {
   for (const auto& c : a.configs) induration::applyPipelineOptions(&opt, c);
   for (const auto& kv : a.sets) induration::setPipelineOption(&opt, kv.first, kv.second);
   opt.validate();  // a bad configuration is refused before the bag is read
-  ros_run::IndurationRunner runner(opt, "", ros_run::RunLog::stderrLog("process_bag", a.quiet));
+  // --site: the same runner as the site_fusion nodelet's, its per-pair measurement as --induration's
+  std::unique_ptr<ros_run::SiteRunner> site;
+  std::optional<ros_run::IndurationRunner> alone;
+  const std::string pose_topic = a.site_poses.empty() ? "slam/odometry" : a.site_poses;
+  if (a.site) {
+    ros_run::SiteRunOptions ro;
+    ro.poses = pose_topic;
+    ro.pose_wait = 0;  // every pose of the bag is known before the first pair
+    site = std::make_unique<ros_run::SiteRunner>(opt, siteOptions(a.site_sets), ro, "",
+                                                 ros_run::RunLog::stderrLog("process_bag", a.quiet));
+  } else {
+    alone.emplace(opt, "", ros_run::RunLog::stderrLog("process_bag", a.quiet));
+  }
+  ros_run::IndurationRunner& runner = site ? site->measurer() : *alone;
   if (a.every_frame_maps) runner.keepEveryFrameMaps(a.out);
 
   rosbag::Bag bag;
@@ -153,12 +167,13 @@ int runInduration(const IndurationRun& a) {
                                   " (" + topics.summary() + "). Its topics:\n" + ros_io::describeTopics(topics.all()));
   }
   if (!a.quiet) std::fprintf(stderr, "process_bag: %s\n", topics.summary().c_str());
-  // --site: the poses, and the fusion that every measured frame goes into
-  std::unique_ptr<site::SiteFusion> fusion;
-  std::map<double, Eigen::Isometry3d> poses;
-  std::string pose_topic = a.site_poses.empty() ? "slam/odometry" : a.site_poses;
-  if (a.site) {
-    fusion = std::make_unique<site::SiteFusion>(siteOptions(a.site_sets), opt.induration);
+  std::vector<site::SiteFrame> site_lines;  // printed after the pair's own line
+  auto printSiteLines = [&site_lines]() {
+    for (const auto& f : site_lines) printSiteFrame(f);
+    site_lines.clear();
+  };
+  if (site) {
+    std::map<double, Eigen::Isometry3d> poses;
     try {
       poses = readPoses(bag, a.bag, pose_topic, a.ns);
     } catch (const std::invalid_argument& e) {
@@ -168,30 +183,9 @@ int runInduration(const IndurationRun& a) {
     }
     if (poses.empty()) throw std::invalid_argument("--site: '" + pose_topic + "' in '" + a.bag + "' holds no pose");
     if (!a.quiet) std::fprintf(stderr, "process_bag: site: %zu poses on %s\n", poses.size(), pose_topic.c_str());
+    for (const auto& [t, T] : poses) site->onPose(t, T);
+    if (!a.quiet) site->onFrame([&site_lines](const site::SiteFrame& f) { site_lines.push_back(f); });
   }
-  auto fuse = [&](const induration::FrameMeasurement& m) {
-    constexpr double kTolerance = 0.01;  // s
-    auto it = poses.lower_bound(m.record.stamp - kTolerance);
-    if (it == poses.end() || it->first > m.record.stamp + kTolerance) {
-      fusion->skip(m.record.stamp, "no pose on " + pose_topic + " within 10 ms of its stamp");
-      std::fprintf(stderr, "process_bag: site: frame at t = %.3f s has no pose within 10 ms: left out\n", m.record.stamp);
-      return;
-    }
-    auto best = it;
-    for (auto q = it; q != poses.end() && q->first <= m.record.stamp + kTolerance; ++q)
-      if (std::fabs(q->first - m.record.stamp) < std::fabs(best->first - m.record.stamp)) best = q;
-    const site::SiteFrame& f = fusion->add(m.cloud, m.record.result, best->second, m.record.stamp);
-    if (a.quiet) return;
-    if (f.fused)
-      std::printf("  site: fused %ld samples (overlap %.0f %%; seams over %d blocks %.1f um RMS, %.1f um beyond the noise, "
-                  "rigid part %.1f um; registration moved it %.3f mm in %d iterations; %.1f s registration, %.1f s fusion)\n",
-                  f.samples, 100 * f.overlap, f.seam_blocks, f.seam_rms * 1e6, f.seam_excess * 1e6, f.seam_rigid * 1e6,
-                  f.correction_rms * 1e3, f.registration_iterations, f.seconds_register, f.seconds_fuse);
-    else
-      std::printf("  site: frame left out: %s\n", f.reason.c_str());
-    std::fflush(stdout);
-  };
-
   rosbag::View view(bag, rosbag::TopicQuery(ros_io::stereoTopicsRead(topics)));
   int expected = static_cast<int>(topics.count(ros_io::stereoImageTopic(topics, true)));
   if (a.frames >= 0 && a.frames < expected) expected = a.frames;
@@ -202,13 +196,10 @@ int runInduration(const IndurationRun& a) {
   int fed = 0;
   auto feed = [&](const sensor_msgs::Image::ConstPtr& l, const sensor_msgs::Image::ConstPtr& r) {
     ++fed;
-    const int before = runner.frames();
-    if (runner.onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg()) && !a.quiet)
-      printFrame(*runner.last(), runner.frames(), expected);
-    if (fusion) {
-      if (runner.frames() > before) fuse(*runner.last());
-      else fusion->skip(l->header.stamp.toSec(), "the pair could not be measured (the log above says why)");
-    }
+    const bool ok = site ? site->onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg())
+                         : runner.onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg());
+    if (ok && !a.quiet) printFrame(*runner.last(), runner.frames(), expected);
+    printSiteLines();
   };
   const auto full = [&]() { return a.frames >= 0 && fed >= a.frames; };
   for (const rosbag::MessageInstance& mi : view) {
@@ -227,11 +218,14 @@ int runInduration(const IndurationRun& a) {
 
   // ---- results (also when only some frames worked)
   std::string message;
-  if (!runner.save(a.out, &message, a.command_line, a.bag, &pairs_ledger)) throw std::runtime_error(message);
+  site::SiteResult sr;
+  if (site) site->finish();
+  printSiteLines();
+  if (!(site ? site->save(a.out, &message, a.command_line, a.bag, &pairs_ledger, &sr)
+             : runner.save(a.out, &message, a.command_line, a.bag, &pairs_ledger)))
+    throw std::runtime_error(message);
   if (!a.quiet) printTable(*runner.last(), runner.frames(), dropped.dropped(), a.out);
-  if (fusion) {
-    const site::SiteResult sr = fusion->measure();
-    site::writeSiteResults(a.out, sr, fusion->frames(), a.bag, a.command_line);
+  if (site) {
     if (!a.quiet) printSite(sr, a.out);
     if (runner.frames() > 1 && sr.frames_fused < 2) {
       std::fprintf(stderr, "process_bag: site: %d of %d frames could be fused: the sweep's frames do not overlap (site.yaml "

@@ -4,7 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "skin3d/geometry/quaternion.h"
 #include "skin3d/induration/induration.h"
@@ -168,6 +171,40 @@ TEST(SiteFusion, AnOrbitIsFusedAndEachPlaqueMeasuredOnce) {
     EXPECT_NEAR(m->volume, t.volume, 0.10 * t.volume) << "plaque " << k;
     EXPECT_GE(m->views, 1) << "plaque " << k;
   }
+  // the live view: the whole turn of the limb in coarse cells, what was seen on the limb's surface, what was not empty
+  const site::SitePreview pv = fusion.preview(40000);
+  EXPECT_EQ(pv.model, "cylinder");
+  EXPECT_EQ(pv.frames_fused, 7);
+  ASSERT_FALSE(pv.height.empty());
+  EXPECT_LE(pv.height.total(), 40000u * 1.1);
+  int known = 0, unseen = 0;
+  for (int j = 0; j < pv.height.rows; ++j)
+    for (int i = 0; i < pv.height.cols; ++i) {
+      const cv::Vec3f X = pv.world_xyz.at<cv::Vec3f>(j, i);
+      if (!std::isfinite(pv.height.at<float>(j, i))) {
+        EXPECT_EQ(pv.frames.at<uchar>(j, i), 0);
+        ++unseen;
+        continue;
+      }
+      ++known;
+      EXPECT_GE(pv.frames.at<uchar>(j, i), 1);
+      const Eigen::Vector3d L = T_limb_C0 * Eigen::Vector3d(X[0], X[1], X[2]);  // on the limb: between its semi-axes
+      EXPECT_GT(std::hypot(L.y(), L.z()), 0.040 - 0.5e-3);
+      EXPECT_LT(std::hypot(L.y(), L.z()), 0.045 + 1.5e-3);
+    }
+  EXPECT_GT(known, 0);
+  EXPECT_GT(unseen, known / 4) << "the views cover about 220 deg of the turn: the back of the limb is not covered";
+  for (std::size_t k = 0; k < 3; ++k) {  // each plaque stands out of the preview by about its height
+    const sim::SkinPlaqueTruth t = orbit.scene.plaqueTruth(k);
+    const Eigen::Vector3d c = T_C0_limb * t.centroid;
+    float top = -1;
+    for (int j = 0; j < pv.height.rows; ++j)
+      for (int i = 0; i < pv.height.cols; ++i) {
+        const cv::Vec3f X = pv.world_xyz.at<cv::Vec3f>(j, i);
+        if (std::isfinite(X[0]) && (Eigen::Vector3d(X[0], X[1], X[2]) - c).norm() < 3e-3) top = std::max(top, pv.height.at<float>(j, i));
+      }
+    EXPECT_NEAR(top, t.top_height, 0.2 * t.top_height) << "plaque " << k << " in the preview";
+  }
 }
 
 TEST(SiteFusion, AFrameThatDoesNotOverlapIsLeftOutAndNamed) {
@@ -191,4 +228,42 @@ TEST(SiteFusion, AFrameThatDoesNotOverlapIsLeftOutAndNamed) {
   const site::SiteResult r = fusion.measure();
   EXPECT_EQ(r.frames_fused, 1);
   EXPECT_EQ(r.frames_left_out, 2);
+}
+
+TEST(SiteOptions, ConfigFileListsExactlyTheKeysWithTheCodeDefaults) {
+  const std::string path = std::string(SKIN3D_SOURCE_DIR) + "/config/site.yaml";
+  // the file applied over options that differ from the defaults in every key gives the defaults back
+  site::SiteOptions from_file;
+  from_file.cell = 1e-3;
+  from_file.max_incidence_deg = 50;
+  from_file.register_frames = false;
+  from_file.register_stride = 7;
+  from_file.register_iterations = 3;
+  from_file.min_overlap = 0.5;
+  from_file.max_correction = 1e-3;
+  from_file.seam_block = 4e-3;
+  const site::SiteOptions defaults;
+  for (const auto& k : site::siteOptionKeys())
+    ASSERT_NE(site::getSiteOption(from_file, k), site::getSiteOption(defaults, k)) << "the test must change " << k;
+  ASSERT_NO_THROW(site::applySiteOptions(&from_file, path));
+  for (const auto& k : site::siteOptionKeys())
+    EXPECT_EQ(site::getSiteOption(from_file, k), site::getSiteOption(defaults, k)) << "key " << k;
+  std::ifstream f(path);
+  std::vector<std::string> file_keys;
+  std::string line;
+  while (std::getline(f, line)) {
+    if (line.empty() || line[0] == '#' || line[0] == ' ') continue;
+    file_keys.push_back(line.substr(0, line.find(':')));
+  }
+  EXPECT_EQ(file_keys, site::siteOptionKeys());
+  // a bad key or value is named
+  site::SiteOptions o;
+  try {
+    site::setSiteOption(&o, "site_cel_mm", "1");
+    ADD_FAILURE() << "an unknown key was taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("site_cel_mm"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(site::setSiteOption(&o, "site_register", "yes"), std::invalid_argument);
+  EXPECT_THROW(site::setSiteOption(&o, "site_min_overlap", "-1"), std::invalid_argument);
 }

@@ -32,6 +32,8 @@ NODES = {
     "eskf_slam": (["src/ros/slam_runner.cpp", "src/ros/slam_messages.cpp"], [("config/slam.yaml", "docs/slam.md")]),
     "stereo_design": (["src/ros/design_node.cpp"], []),
     "induration": (["src/ros/induration_runner.cpp"], [("config/induration.yaml", "docs/induration.md")]),
+    "site_fusion": (["src/ros/site_runner.cpp"], [("config/induration.yaml", "docs/induration.md"),
+                                                  ("config/site.yaml", "docs/site.md")]),
 }
 # runners added later register here by file name pattern (src/ros/<name>_runner.cpp); see find_files()
 

@@ -66,6 +66,16 @@ struct SiteOptions {
   void validate() const;           //!< throws std::invalid_argument naming the option
 };
 
+/** @brief The keys of SiteOptions (config/site.yaml lists each with its default). */
+const std::vector<std::string>& siteOptionKeys();
+/** @brief Sets one option from its text value. @throws std::invalid_argument naming an unknown key or a bad value. */
+void setSiteOption(SiteOptions* o, const std::string& key, const std::string& value);
+/** @brief One option as text (the form setSiteOption reads). */
+std::string getSiteOption(const SiteOptions& o, const std::string& key);
+/** @brief The keys of a YAML file (config/site.yaml's form) over `o`. @throws std::invalid_argument naming the file
+ *  or the key. */
+void applySiteOptions(SiteOptions* o, const std::string& path);
+
 /** @brief The body surface the site is unrolled on: world <-> (u, v, w). */
 struct SiteSurface {
   std::string model = "plane";  //!< "cylinder" (a limb) or "plane"
@@ -141,6 +151,19 @@ struct SiteResult {
   induration::IndurationResult flat;  //!< the measurement of the unrolled map
 };
 
+/** @brief A quick look at the site fused so far, for the live view (coarser than the fused cells; no plaques). */
+struct SitePreview {
+  std::string model;               //!< the body surface ("cylinder" or "plane"); empty before the first frame
+  double cell = 0;                 //!< m, the preview's cell (a whole number of fused cells)
+  double u0 = 0, v0 = 0;           //!< m, (u, v) of cell (0, 0)'s centre
+  /** The whole grid (around a limb: its whole turn, so what was never seen shows too), rows v, columns u:
+   *  the height above a smooth body model fitted to what is fused (m, NaN unknown; plaques not excluded, so it
+   *  is a picture, not the measurement), the mean sigma of the fused cells in it (m), the most frames any of
+   *  them had (0: not covered), and the world point (NaN unknown). */
+  cv::Mat height, sigma, frames, world_xyz;
+  int frames_fused = 0;
+};
+
 class SiteFusion {
  public:
   /** @throws std::invalid_argument for bad options. */
@@ -165,6 +188,9 @@ class SiteFusion {
   bool empty() const;
   /** @brief Measures the site fused so far (may be called at any time). */
   SiteResult measure() const;
+  /** @brief The site fused so far on at most about `max_cells` preview cells (SitePreview); empty before the
+   *  first frame. Fast (a fraction of a second at full resolution): for the live view after every frame. */
+  SitePreview preview(int max_cells = 250000) const;
 
  private:
   SiteOptions options_;
@@ -178,10 +204,15 @@ class SiteFusion {
 double pointToPlane(const Eigen::Vector3d& X, const Eigen::Vector3d& P, const Eigen::Vector3d& n,
                     Eigen::Matrix<double, 1, 6>* J);
 
+/** @brief Frames fused per cell (CV_8U) in false colour (0: dark grey), at most `max_width` px wide, with a legend
+ *  (site_coverage.png and the live site/coverage image). */
+cv::Mat coverageImage(const cv::Mat& frames, int max_width = 1600);
+
 /** @brief The site's results (docs/results.md "Site"): site.yaml, site_height_map.png, site_coverage.png,
- *  site_surface.ply into `dir`. @throws std::runtime_error naming a file that cannot be written. */
+ *  site_surface.ply into `dir`; `frame` names the world frame the poses were given in. @throws std::runtime_error naming a file that cannot be written. */
 void writeSiteResults(const std::string& dir, const SiteResult& r, const std::vector<SiteFrame>& frames,
-                      const std::string& source, const std::vector<std::string>& command_line);
+                      const std::string& source, const std::vector<std::string>& command_line,
+                      const std::string& frame = "world");
 
 }  // namespace site
 }  // namespace skin3d

@@ -27,25 +27,6 @@ void num(YAML::Emitter& y, double v) {
   else y << YAML::Null;
 }
 
-/** Frames per cell in false colour (0 = dark grey), with a legend. */
-cv::Mat coverageImage(const cv::Mat& frames, int max_width = 1600) {
-  double mx = 1;
-  cv::minMaxLoc(frames, nullptr, &mx);
-  mx = std::max(1.0, mx);
-  cv::Mat scaled;
-  frames.convertTo(scaled, CV_8U, 255.0 / mx);
-  cv::Mat colour;
-  cv::applyColorMap(scaled, colour, cv::COLORMAP_VIRIDIS);
-  colour.setTo(cv::Scalar(40, 40, 40), frames == 0);
-  if (colour.cols > max_width) cv::resize(colour, colour, cv::Size(), max_width / static_cast<double>(colour.cols),
-                                          max_width / static_cast<double>(colour.cols), cv::INTER_AREA);
-  cv::Mat out(colour.rows + 40, colour.cols, CV_8UC3, cv::Scalar(255, 255, 255));
-  colour.copyTo(out(cv::Rect(0, 0, colour.cols, colour.rows)));
-  cv::putText(out, "frames fused per cell: dark grey 0 ... yellow " + std::to_string(static_cast<int>(mx)),
-              cv::Point(8, colour.rows + 28), cv::FONT_HERSHEY_SIMPLEX, 0.7, cv::Scalar(0, 0, 0), 2);
-  return out;
-}
-
 void writePly(const std::string& path, const SiteResult& r) {
   std::vector<std::pair<int, int>> cells;
   for (int j = 0; j < r.world_xyz.rows; ++j)
@@ -69,12 +50,31 @@ void writePly(const std::string& path, const SiteResult& r) {
 
 }  // namespace
 
+/** Frames per cell in false colour (0 = dark grey), with a legend. */
+cv::Mat coverageImage(const cv::Mat& frames, int max_width) {
+  double mx = 1;
+  cv::minMaxLoc(frames, nullptr, &mx);
+  mx = std::max(1.0, mx);
+  cv::Mat scaled;
+  frames.convertTo(scaled, CV_8U, 255.0 / mx);
+  cv::Mat colour;
+  cv::applyColorMap(scaled, colour, cv::COLORMAP_VIRIDIS);
+  colour.setTo(cv::Scalar(40, 40, 40), frames == 0);
+  if (colour.cols > max_width) cv::resize(colour, colour, cv::Size(), max_width / static_cast<double>(colour.cols),
+                                          max_width / static_cast<double>(colour.cols), cv::INTER_AREA);
+  cv::Mat out(colour.rows + 40, colour.cols, CV_8UC3, cv::Scalar(255, 255, 255));
+  colour.copyTo(out(cv::Rect(0, 0, colour.cols, colour.rows)));
+  cv::putText(out, "frames fused per cell: dark grey 0 ... yellow " + std::to_string(static_cast<int>(mx)),
+              cv::Point(8, colour.rows + 28), cv::FONT_HERSHEY_SIMPLEX, 0.7, cv::Scalar(0, 0, 0), 2);
+  return out;
+}
+
 void writeSiteResults(const std::string& dir, const SiteResult& r, const std::vector<SiteFrame>& frames,
-                      const std::string& source, const std::vector<std::string>& command_line) {
+                      const std::string& source, const std::vector<std::string>& command_line, const std::string& frame) {
   std::filesystem::create_directories(dir);
   YAML::Emitter y;
   y << YAML::BeginMap;
-  y << YAML::Key << "frame" << YAML::Value << "world";
+  y << YAML::Key << "frame" << YAML::Value << frame;
   y << YAML::Key << "source" << YAML::Value << source;
   y << YAML::Key << "command_line" << YAML::Value << YAML::Flow << command_line;
   y << YAML::Key << "surface" << YAML::Value << YAML::BeginMap;

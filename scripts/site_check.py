@@ -10,7 +10,9 @@ Prints per true plaque: its top height, how the sweep saw it (the first frame's 
 plaque matched to it (nearest centroid within max(3 mm, its radius)) with the error of its top height, its PASI
 class, area (against the truth's area at half height: the outline is drawn there) and volume; the first frame's own
 measurement of it; then duplicates and false plaques (site plaques no true plaque claims), the coverage of the skin
-some frame sees within 45 deg in both cameras, and the seams. --json writes the same figures for scripts.
+some frame sees within 45 deg in both cameras, the seams, and how far each fused pair was placed from its true
+pose (the truth's sweep.poses_world_left; position of the pair's camera and of the skin it looks at, 250 mm
+ahead, and the rotation). --json writes the same figures for scripts.
 """
 import json
 import math
@@ -33,6 +35,37 @@ def read_ply(path):
                 break
         dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("h", "<f4"), ("s", "<f4"), ("n", "u1")])
         return np.frombuffer(f.read(n * dt.itemsize), dtype=dt, count=n)
+
+
+def rotation(q):
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def pose_errors(site, truth):
+    """Each fused pair's placement against the truth's pose at its stamp (both world <- left optical frame)."""
+    true = {round(p["t"], 3): p for p in (truth.get("sweep") or {}).get("poses_world_left", [])}
+    t0 = min((f["stamp"] for f in site.get("frames", [])), default=0.0)
+    cam, skin, rot = [], [], []
+    for f in site.get("frames", []):
+        p = true.get(round(f["stamp"] - t0, 3))
+        if not f.get("fused") or p is None or "translation_m" not in f:
+            continue
+        R, Rt = rotation(f["quaternion_wxyz"]), rotation(p["quaternion_wxyz"])
+        t, tt = np.array(f["translation_m"]), np.array(p["translation_m"])
+        ahead = np.array([0, 0, 0.25])
+        cam.append(np.linalg.norm(t - tt))
+        skin.append(np.linalg.norm(R @ ahead + t - (Rt @ ahead + tt)))
+        c = np.clip((np.trace(R @ Rt.T) - 1) / 2, -1, 1)
+        rot.append(math.acos(c))
+    if not cam:
+        return None
+    ms = lambda v, k: (1e3 * k * math.sqrt(np.mean(np.square(v))), 1e3 * k * max(v))
+    (cr, cm), (sr, sm), (rr, rm) = ms(cam, 1), ms(skin, 1), ms(rot, 1)
+    return {"pairs": len(cam), "camera_rms_mm": cr, "camera_max_mm": cm, "skin_rms_mm": sr, "skin_max_mm": sm,
+            "rotation_rms_mrad": rr, "rotation_max_mrad": rm}
 
 
 def main(argv=None):
@@ -151,9 +184,16 @@ def main(argv=None):
     print("seams: %.1f um RMS, %.1f um from the noise, %.1f um beyond it, rigid part %.1f um; %s frames fused, %s left out"
           % (val("rms_um"), val("noise_um"), val("beyond_noise_um"), val("rigid_um"), site.get("frames_fused"),
              site.get("frames_left_out")))
+    poses = pose_errors(site, truth)
+    if poses:
+        print("poses: camera placed %.3f mm RMS (max %.3f) from the truth, the skin it looks at %.3f mm RMS (max %.3f), "
+              "rotation %.3f mrad RMS (max %.3f), over %d pairs"
+              % (poses["camera_rms_mm"], poses["camera_max_mm"], poses["skin_rms_mm"], poses["skin_max_mm"],
+                 poses["rotation_rms_mrad"], poses["rotation_max_mrad"], poses["pairs"]))
     if js:
         json.dump({"plaques": rows, "duplicates": {str(k): v for k, v in dup.items()}, "false": false,
-                   "coverage": coverage, "seams": seams, "grazing": len(grazing)}, open(js, "w"), indent=1)
+                   "coverage": coverage, "seams": seams, "grazing": len(grazing), "poses": poses}, open(js, "w"),
+                  indent=1)
     return 0
 
 

@@ -68,7 +68,7 @@ sensor_msgs::PointCloud2Ptr previewCloud(const site::SitePreview& p, const std::
 
 void SiteRunOptions::validate() const {
   std::string bad;
-  if (poses.empty()) bad += "poses must name a pose topic or be 'tf'; ";
+  if (poses.empty()) bad += "poses must name a pose topic or be 'tf' or 'images'; ";
   if (world_frame.empty()) bad += "world_frame must not be empty; ";
   if (!(pose_tolerance > 0) || pose_tolerance > 1) bad += "pose_tolerance = " + std::to_string(pose_tolerance) + " s must be in (0, 1]; ";
   if (!(pose_wait >= 0)) bad += "pose_wait = " + std::to_string(pose_wait) + " s must be >= 0; ";
@@ -80,6 +80,7 @@ SiteRunner::SiteRunner(const induration::PipelineOptions& options, const site::S
                        const SiteRunOptions& run, const std::string& results, RunLog log)
     : log_(std::move(log)), run_(run), measurer_(options, "", log_), fusion_(site, options.induration), results_(results) {
   run_.validate();
+  if (run_.poses == "images") front_end_ = std::make_unique<stereo::FrontEnd>(site::odometryFrontEndOptions());
 }
 
 SiteRunner::~SiteRunner() {
@@ -121,6 +122,14 @@ bool SiteRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs::Camer
   }
   const induration::FrameMeasurement& m = *measurer_.last();
   Pending p;
+  if (front_end_) {  // its features, for its pose
+    try {
+      p.landmarks = site::odometryFeatures(front_end_.get(), ros_conv::toMono8(li), ros_conv::toMono8(ri),
+                                           ros_conv::fromMsg(lc), ros_conv::fromMsg(rc));
+    } catch (const std::exception& e) {
+      log_.warnThrottled("features", std::string("the pair's features could not be found: ") + e.what());
+    }
+  }
   p.cloud = m.cloud;  // shares the pixels (and the maps below): the measurer makes new ones for the next pair
   p.own = m.record.result;  // with its height map: the fusion takes only what it measured as skin
   p.stamp = m.record.stamp;
@@ -170,6 +179,22 @@ bool SiteRunner::poseAt(double stamp, const std::string& frame_id, Eigen::Isomet
   return true;
 }
 
+bool SiteRunner::poseFromImages(const Pending& p, Eigen::Isometry3d* T, std::string* why) {
+  bool any_fused = false;
+  for (const auto& f : fusion_.frames()) any_fused |= f.fused;
+  if (!any_fused) {  // the first pair placed defines the world
+    *T = Eigen::Isometry3d::Identity();
+    return true;
+  }
+  const site::RelativeMotion m = site::relativeMotion(last_fused_landmarks_, p.landmarks, site::OdometryOptions());
+  if (!m.ok) {
+    *why = "no pose from the images: its features and those of the last pair fused do not give one motion (" + m.why + ")";
+    return false;
+  }
+  *T = last_fused_pose_ * m.T_a_b;
+  return true;
+}
+
 void SiteRunner::drainLocked(bool give_up) {
   const auto now = std::chrono::steady_clock::now();
   while (!waiting_.empty()) {
@@ -178,6 +203,19 @@ void SiteRunner::drainLocked(bool give_up) {
     if (!p.failed.empty()) {
       fusion_.skip(p.stamp, p.failed);
       recordLocked(fusion_.frames().back());
+    } else if (front_end_) {
+      std::string why;
+      if (poseFromImages(p, &T, &why)) {
+        const site::SiteFrame& f = fusion_.add(p.cloud, p.own, T, p.stamp);
+        if (f.fused) {
+          last_fused_landmarks_ = p.landmarks;
+          last_fused_pose_ = f.pose;
+        }
+        recordLocked(f);
+      } else {
+        fusion_.skip(p.stamp, why);
+        recordLocked(fusion_.frames().back());
+      }
     } else if (poseAt(p.stamp, p.frame_id, &T)) {
       recordLocked(fusion_.add(p.cloud, p.own, T, p.stamp));
     } else if (give_up || std::chrono::duration<double>(now - p.measured).count() > run_.pose_wait) {
@@ -298,7 +336,9 @@ void SiteRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std::st
     pub_coverage_ = nh.advertise<sensor_msgs::Image>("site/coverage", 1, true);
     attached_ = true;
   }
-  if (run_.poses == "tf") {
+  if (run_.poses == "images") {
+    // the pairs' own features place them
+  } else if (run_.poses == "tf") {
     tf_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(120.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_, nh);
   } else {

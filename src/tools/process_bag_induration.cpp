@@ -172,7 +172,10 @@ int runInduration(const IndurationRun& a) {
     for (const auto& f : site_lines) printSiteFrame(f);
     site_lines.clear();
   };
-  if (site) {
+  if (site && pose_topic == "images") {
+    if (!a.quiet) std::fprintf(stderr, "process_bag: site: poses from the pairs' own stereo features\n");
+    if (!a.quiet) site->onFrame([&site_lines](const site::SiteFrame& f) { site_lines.push_back(f); });
+  } else if (site) {
     std::map<double, Eigen::Isometry3d> poses;
     try {
       poses = readPoses(bag, a.bag, pose_topic, a.ns);

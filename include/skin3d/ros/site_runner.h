@@ -8,7 +8,9 @@
  * bag's pairs, so both write the same site.yaml.
  *
  * Poses: from a topic (geometry_msgs/PoseStamped or nav_msgs/Odometry: world <- the left optical frame; the ES-EKF's
- * slam/odometry by default) or from TF (world_frame <- the left image's frame_id). A measured pair waits up to
+ * slam/odometry by default), from TF (world_frame <- the left image's frame_id), or from the images themselves
+ * ("images": each pair's stereo features matched with those of the last pair fused, site/pair_odometry.h; the pose
+ * is that pair's registered pose times the motion between them, and the registration refines it). A measured pair waits up to
  * `pose_wait` s (wall) for its pose (a pose within `pose_tolerance` s of its stamp), then is left out and named;
  * pairs are fused in the order they were taken.
  *
@@ -33,7 +35,9 @@
 #include <vector>
 
 #include "skin3d/ros/induration_runner.h"
+#include "skin3d/site/pair_odometry.h"
 #include "skin3d/site/site_fusion.h"
+#include "skin3d/stereo/front_end.h"
 
 namespace tf2_ros {
 class Buffer;
@@ -44,7 +48,7 @@ namespace skin3d {
 namespace ros_run {
 
 struct SiteRunOptions {
-  std::string poses = "slam/odometry";  //!< pose topic (PoseStamped or Odometry), or "tf"
+  std::string poses = "slam/odometry";  //!< pose topic (PoseStamped or Odometry), "tf", or "images"
   std::string world_frame = "world";    //!< the site's frame (TF: the frame looked up; also the outputs' frame_id)
   double pose_tolerance = 0.01;         //!< s, a pose belongs to a pair when its stamp is this close
   double pose_wait = 5.0;               //!< s (wall) a measured pair waits for its pose (0: none, it is left out at once)
@@ -94,9 +98,12 @@ class SiteRunner {
     double stamp = 0;
     std::string frame_id;
     std::string failed;  // why the pair could not be measured (then it is only recorded, in its turn)
+    std::vector<stereo::StereoLandmark> landmarks;  // "images": its triangulated features
     std::chrono::steady_clock::time_point measured;
   };
   bool poseAt(double stamp, const std::string& frame_id, Eigen::Isometry3d* T);
+  /** "images": the pose of a pair from its features and the last pair fused; false with *why when they do not match */
+  bool poseFromImages(const Pending& p, Eigen::Isometry3d* T, std::string* why);
   void drainLocked(bool give_up);  // fuses the waiting pairs in order while their poses are known
   void recordLocked(const site::SiteFrame& f);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -111,6 +118,9 @@ class SiteRunner {
   IndurationRunner measurer_;
   site::SiteFusion fusion_;
   std::deque<Pending> waiting_;
+  std::unique_ptr<stereo::FrontEnd> front_end_;             // "images"
+  std::vector<stereo::StereoLandmark> last_fused_landmarks_;  // "images": those of the last pair fused
+  Eigen::Isometry3d last_fused_pose_ = Eigen::Isometry3d::Identity();
   std::map<double, Eigen::Isometry3d> poses_;
   std::string results_, node_name_ = "site_fusion";
   std::vector<std::string> pair_frame_ids_;

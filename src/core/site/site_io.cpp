@@ -152,6 +152,13 @@ void writeSiteResults(const std::string& dir, const SiteResult& r, const std::ve
       << f.seconds_register << YAML::Key << "fuse" << YAML::Value << f.seconds_fuse << YAML::EndMap;
     y << YAML::Key << "registration_correction_mm" << YAML::Value << f.correction_rms * 1e3;
     y << YAML::Key << "plaques_own" << YAML::Value << static_cast<int>(f.plaques.size());
+    if (f.fused) {  // where the pair was placed: world <- its left optical frame, after the registration
+      const Eigen::Quaterniond q(f.pose.linear());
+      y << YAML::Key << "translation_m" << YAML::Value << YAML::Flow << YAML::BeginSeq << f.pose.translation().x()
+        << f.pose.translation().y() << f.pose.translation().z() << YAML::EndSeq;
+      y << YAML::Key << "quaternion_wxyz" << YAML::Value << YAML::Flow << YAML::BeginSeq << q.w() << q.x() << q.y() << q.z()
+        << YAML::EndSeq;
+    }
     y << YAML::EndMap;
   }
   y << YAML::EndSeq;

@@ -56,20 +56,43 @@ InputLedger IndurationRunner::ledger() const {
 
 bool IndurationRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs::CameraInfo& lc,
                                 const sensor_msgs::Image& ri, const sensor_msgs::CameraInfo& rc) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::lock_guard<std::mutex> serial(serial_mutex_);  // live callbacks on several threads: one pair after the other
+  return complete(match(li, lc, ri, rc), li.header);
+}
+
+std::unique_ptr<induration::FrameMeasurement> IndurationRunner::match(const sensor_msgs::Image& li,
+                                                                      const sensor_msgs::CameraInfo& lc,
+                                                                      const sensor_msgs::Image& ri,
+                                                                      const sensor_msgs::CameraInfo& rc) {
+  std::lock_guard<std::mutex> order(match_mutex_);  // the rectification it keeps: one pair at a time
   const double t = li.header.stamp.toSec();
   const ros_conv::PairFault bad = ros_conv::checkStereoPair(li, lc, ri, rc);
   if (bad) {
+    std::lock_guard<std::mutex> lock(mutex_);
     ledger_.drop(bad.topic, t, bad.fault);
-    return false;
+    return nullptr;
   }
   auto m = std::make_unique<induration::FrameMeasurement>();
   try {
-    *m = measurer_.measure(ros_conv::toMono8(li), ros_conv::toMono8(ri), ros_conv::fromMsg(lc), ros_conv::fromMsg(rc), t);
+    *m = measurer_.match(ros_conv::toMono8(li), ros_conv::toMono8(ri), ros_conv::fromMsg(lc), ros_conv::fromMsg(rc), t);
   } catch (const std::exception& e) {
+    std::lock_guard<std::mutex> lock(mutex_);
     ledger_.drop("stereo/left/image_raw", t, e.what(), "the pair could not be measured");
+    return nullptr;
+  }
+  return m;
+}
+
+bool IndurationRunner::complete(std::unique_ptr<induration::FrameMeasurement> m, const std_msgs::Header& header) {
+  if (!m) return false;
+  try {
+    measurer_.finish(m.get());
+  } catch (const std::exception& e) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ledger_.drop("stereo/left/image_raw", header.stamp.toSec(), e.what(), "the pair could not be measured");
     return false;
   }
+  std::lock_guard<std::mutex> lock(mutex_);
   status_.frameDone();
   for (const auto& w : m->record.result.warnings) log_.warnThrottled("warning " + w.substr(0, 40), w);
   if (!frames_.empty()) {  // only the last frame keeps its maps
@@ -85,16 +108,16 @@ bool IndurationRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs:
       log_.warnThrottled("frame maps", std::string("the frame's maps were not written: ") + e.what());
     }
   }
-  frame_id_ = li.header.frame_id;
+  frame_id_ = header.frame_id;
   unsaved_ = true;
   if (attached_) {
-    pub_report_.publish(ros_conv::toReportMsg(m->record.result, li.header));
+    pub_report_.publish(ros_conv::toReportMsg(m->record.result, header));
     if (!m->record.result.height_map.empty())
-      pub_height_.publish(cv_bridge::CvImage(li.header, sensor_msgs::image_encodings::TYPE_32FC1,
+      pub_height_.publish(cv_bridge::CvImage(header, sensor_msgs::image_encodings::TYPE_32FC1,
                                              m->record.result.height_map).toImageMsg());
-    if (pub_points_.getNumSubscribers() > 0) pub_points_.publish(ros_conv::toCloudMsg(m->cloud, m->left_rect, li.header));
+    if (pub_points_.getNumSubscribers() > 0) pub_points_.publish(ros_conv::toCloudMsg(m->cloud, m->left_rect, header));
     if (pub_rect_.getNumSubscribers() > 0)
-      pub_rect_.publish(ros_conv::toMono8Msg(m->left_rect, li.header.frame_id, li.header.stamp));
+      pub_rect_.publish(ros_conv::toMono8Msg(m->left_rect, header.frame_id, header.stamp));
   }
   last_ = std::move(m);
   return true;

@@ -108,12 +108,34 @@ int SiteRunner::framesWaiting() const {
 
 bool SiteRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs::CameraInfo& lc,
                           const sensor_msgs::Image& ri, const sensor_msgs::CameraInfo& rc) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::lock_guard<std::mutex> serial(serial_mutex_);  // live callbacks on several threads: one pair after the other
+  return complete(prepare(li, lc, ri, rc));
+}
+
+SiteRunner::Prepared SiteRunner::prepare(const sensor_msgs::Image& li, const sensor_msgs::CameraInfo& lc,
+                                         const sensor_msgs::Image& ri, const sensor_msgs::CameraInfo& rc) {
+  std::lock_guard<std::mutex> order(prepare_mutex_);  // the front end's rectification: one pair at a time
+  Prepared p;
+  p.header = li.header;
+  p.measurement = measurer_.match(li, lc, ri, rc);
+  if (p.measurement && front_end_) {  // its features, for its pose
+    try {
+      p.landmarks = site::odometryFeatures(front_end_.get(), ros_conv::toMono8(li), ros_conv::toMono8(ri),
+                                           ros_conv::fromMsg(lc), ros_conv::fromMsg(rc));
+    } catch (const std::exception& e) {
+      log_.warnThrottled("features", std::string("the pair's features could not be found: ") + e.what());
+    }
+  }
+  return p;
+}
+
+bool SiteRunner::complete(Prepared pr) {
   const int before = measurer_.frames();
-  const bool ok = measurer_.onStereo(li, lc, ri, rc);
+  const bool ok = measurer_.complete(std::move(pr.measurement), pr.header);
+  std::lock_guard<std::mutex> lock(mutex_);
   if (!ok || measurer_.frames() == before || !measurer_.last()) {
     Pending p;  // recorded as left out in its turn
-    p.stamp = li.header.stamp.toSec();
+    p.stamp = pr.header.stamp.toSec();
     p.failed = "the pair could not be measured (the log says why)";
     p.measured = std::chrono::steady_clock::now();
     waiting_.push_back(std::move(p));
@@ -122,18 +144,11 @@ bool SiteRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs::Camer
   }
   const induration::FrameMeasurement& m = *measurer_.last();
   Pending p;
-  if (front_end_) {  // its features, for its pose
-    try {
-      p.landmarks = site::odometryFeatures(front_end_.get(), ros_conv::toMono8(li), ros_conv::toMono8(ri),
-                                           ros_conv::fromMsg(lc), ros_conv::fromMsg(rc));
-    } catch (const std::exception& e) {
-      log_.warnThrottled("features", std::string("the pair's features could not be found: ") + e.what());
-    }
-  }
+  p.landmarks = std::move(pr.landmarks);
   p.cloud = m.cloud;  // shares the pixels (and the maps below): the measurer makes new ones for the next pair
   p.own = m.record.result;  // with its height map: the fusion takes only what it measured as skin
   p.stamp = m.record.stamp;
-  p.frame_id = li.header.frame_id;
+  p.frame_id = pr.header.frame_id;
   p.measured = std::chrono::steady_clock::now();
   waiting_.push_back(std::move(p));
   unsaved_ = true;

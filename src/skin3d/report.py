@@ -3,11 +3,13 @@
 
 usage: report.py --out REPORT.html [--title TEXT] [--frame K] RESULTS_DIR[=NAME] [RESULTS_DIR[=NAME] ...]
 
-A results directory is what process_bag (SLAM or --induration) or the eskf_slam / induration nodelets write
+A results directory is what process_bag (SLAM, --induration or --site) or the eskf_slam / induration / site_fusion
+nodelets write
 (DESIGN.md, "Results of an offline run"). For each run the page shows the dataset (the bag, and its
 generator's ground truth when BAG.truth.yaml lies beside it), the figures of merit, the plots of the thesis
 (skin3d_plots.py: Fig. 7.1 pose/velocity/error, Fig. 7.2 covariance trace, Fig. 7.4 correlation matrix, the
-sphere fit of Table 7.2; the height map and Table 4.2 for the workpiece) and every parameter of the run
+sphere fit of Table 7.2; the height map and Table 4.2 for the workpiece; for a site scan its plaques, seams,
+pairs, the site's height map and coverage, against the sweep's truth when it lies beside the bag) and every parameter of the run
 (parameters.yaml). With several SLAM runs, a Table 7.2 comparison with the thesis' figures and skin3d's
 targets comes first. Exit status: 0 written, 1 a directory could not be read, 2 bad command line.
 """
@@ -199,6 +201,71 @@ def induration_section(run):
     return "\n".join(parts)
 
 
+def site_section(run):
+    """The site scan of a results directory with site.yaml (process_bag --site, the site_fusion nodelet)."""
+    site = sp.load_yaml(os.path.join(run.dir, "site.yaml")) or {}
+    surf, ref, seams = site.get("surface") or {}, site.get("reference") or {}, site.get("seams") or {}
+    parts = ["<h2>%s — site scan (%s pairs fused, %s left out)</h2>" % (
+        esc(run.name), esc(site.get("frames_fused")), esc(site.get("frames_left_out"))),
+        "<p>Body surface: %s (radius %s mm), cells of %s µm, %s mm² fused. Body model: %s, healthy skin's scatter "
+        "about it %s µm; the unrolled map's detection threshold %s mm. Seams between the pairs: %s µm RMS, %s µm "
+        "of it the pairs' noise, rigid part (what a pose error leaves) %s µm. Input: %s.</p>" % (
+            esc(surf.get("model")), fmt(surf.get("radius_mm"), "%.1f"), fmt(surf.get("cell_um"), "%.0f"),
+            fmt(surf.get("fused_area_mm2"), "%.0f"), esc(ref.get("body_model")), fmt(ref.get("body_scatter_um"), "%.1f"),
+            fmt(ref.get("detection_threshold_mm"), "%.3f"), fmt(seams.get("rms_um"), "%.1f"),
+            fmt(seams.get("noise_um"), "%.1f"), fmt(seams.get("rigid_um"), "%.1f"), esc(site.get("source")))]
+    truth = run.truth_yaml or {}
+    true_plaques = truth.get("plaques") if truth.get("sweep") else None
+
+    def truth_of(p):
+        """The true plaque nearest the site plaque, within max(3 mm, its radius)."""
+        best, best_d = None, None
+        for q in true_plaques or []:
+            d = np.linalg.norm(np.array(p["centroid_m"]) - np.array(q["centroid_left_m"]))
+            if d <= max(3e-3, np.sqrt(q.get("area_mm2", 0) / np.pi) * 1e-3) and (best_d is None or d < best_d):
+                best, best_d = q, d
+        return best
+
+    rows = []
+    for p in site.get("plaques") or []:
+        q = truth_of(p)
+        row = [esc(p.get("id")), "%.1f %.1f %.1f" % tuple(1e3 * np.array(p["centroid_m"])),
+               "%s ± %s" % (fmt(p.get("top_height_mm")), fmt(p.get("top_height_sigma_mm"))), fmt(p.get("mean_height_mm")),
+               fmt(p.get("area_mm2"), "%.1f"), fmt(p.get("volume_mm3"), "%.2f"), esc(p.get("pasi")), esc(p.get("views")),
+               fmt(p.get("spread_um"), "%.0f"), fmt(p.get("best_incidence_deg"), "%.0f"),
+               "%.0f %%" % (100 * float(p.get("measured_share") or 0))]
+        if true_plaques is not None:
+            row.append("%.3f (%+.1f µm)" % (q["height_mm"], 1e3 * (p["top_height_mm"] - q["height_mm"])) if q else "no true plaque")
+        rows.append(row)
+    head = ["plaque", "centroid x y z (mm, world)", "top (mm)", "mean (mm)", "area (mm²)", "volume (mm³)", "PASI",
+            "views", "spread (µm)", "best incidence (°)", "measured"] + (["true top (error)"] if true_plaques is not None else [])
+    parts.append("<h3>Plaques, each measured once on the fused site</h3>" + table(head, rows))
+    grazing = site.get("seen_only_at_grazing_angles") or []
+    if grazing:
+        parts.append("<p>Never seen within 45° (not measured as plaques): %s</p>" % esc("; ".join(
+            "%.3f mm at %s mm, best %.0f°" % (g["top_height_mm"], [round(1e3 * x, 1) for x in g["centroid_m"]],
+                                              g["best_incidence_deg"]) for g in grazing)))
+    if true_plaques is not None:
+        found = [q for q in true_plaques if any(truth_of(p) is q for p in site.get("plaques") or [])]
+        parts.append("<p>The sweep's truth: %d plaques, %d found.</p>" % (len(true_plaques), len(found)))
+    frows = [[esc(f.get("index")), "fused" if f.get("fused") else "left out: " + esc(f.get("left_out")),
+              "%.0f %%" % (100 * float(f.get("overlap") or 0)), fmt(f.get("seam_rms_um"), "%.1f"),
+              fmt(f.get("seam_rigid_um"), "%.1f"), fmt(f.get("registration_correction_mm"), "%.3f"),
+              esc(f.get("plaques_own"))] for f in site.get("frames") or []]
+    parts.append("<details><summary>%d pairs</summary>%s</details>" % (len(frows), table(
+        ["pair", "", "overlap", "seam RMS (µm)", "rigid part (µm)", "registration moved it (mm)", "its own plaques"], frows)))
+    for name, caption in (("site_height_map.png", "The site unrolled: heights above the body (false colour, scale bar)"),
+                          ("site_coverage.png", "Coverage: pairs fused per cell")):
+        path = os.path.join(run.dir, name)
+        if os.path.exists(path):
+            parts.append("<h3>%s</h3>%s" % (caption, png_file(path)))
+    w = site.get("warnings") or []
+    if w:
+        parts.append("<details><summary>%d warning(s)</summary><ul>%s</ul></details>" % (
+            len(w), "".join("<li>%s</li>" % esc(x) for x in w)))
+    return "\n".join(parts)
+
+
 CSS = """
 body { font-family: sans-serif; max-width: 1250px; margin: 1em auto; color: #222; }
 table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
@@ -287,7 +354,12 @@ def main(argv=None):
             body.append(png(sp.fig_correlation(withcov, frame)))
     for i, r in enumerate(runs):
         print("report: %d/%d %s" % (i + 1, len(runs), r.name), file=sys.stderr)
-        body.append(slam_section(r, frame) if isinstance(r, sp.SlamRun) else induration_section(r))
+        if isinstance(r, sp.SlamRun):
+            body.append(slam_section(r, frame))
+            continue
+        if os.path.exists(os.path.join(r.dir, "site.yaml")):
+            body.append(site_section(r))
+        body.append(induration_section(r))
     page = ("<!DOCTYPE html>\n<html><head><meta charset='utf-8'><title>%s</title><style>%s</style></head><body>\n%s\n"
             "</body></html>\n" % (esc(title), CSS, "\n".join(body)))
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)

@@ -22,7 +22,11 @@
 
 #include <map>
 #include <memory>
+#include <condition_variable>
+#include <exception>
+#include <functional>
 #include <optional>
+#include <thread>
 
 #include "skin3d/common/cli.h"
 #include "skin3d/induration/induration_config.h"
@@ -100,6 +104,69 @@ std::map<double, Eigen::Isometry3d> readPoses(const rosbag::Bag& bag, const std:
   }
   return out;
 }
+
+/** The site's second half on its own thread: complete() each prepared pair in order (a queue of one), `done` after
+ *  each; finish() waits for the last and throws what the thread threw. */
+class SitePipeline {
+ public:
+  SitePipeline(ros_run::SiteRunner* site, std::function<void(bool)> done) : site_(site), done_(std::move(done)) {
+    if (site_) thread_ = std::thread([this] { run(); });
+  }
+  ~SitePipeline() {
+    try {
+      finish();
+    } catch (...) {  // finish() was not called: an exception is already on its way
+    }
+  }
+  void push(ros_run::SiteRunner::Prepared p) {
+    std::unique_lock<std::mutex> l(m_);
+    cv_.wait(l, [this] { return !slot_ || failed_; });
+    if (failed_) return;
+    slot_ = std::make_unique<ros_run::SiteRunner::Prepared>(std::move(p));
+    cv_.notify_all();
+  }
+  void finish() {
+    if (!thread_.joinable()) return;
+    {
+      std::lock_guard<std::mutex> l(m_);
+      closed_ = true;
+      cv_.notify_all();
+    }
+    thread_.join();
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  void run() {
+    for (;;) {
+      std::unique_ptr<ros_run::SiteRunner::Prepared> p;
+      {
+        std::unique_lock<std::mutex> l(m_);
+        cv_.wait(l, [this] { return slot_ || closed_; });
+        if (!slot_) return;
+        p = std::move(slot_);
+        cv_.notify_all();
+      }
+      try {
+        done_(site_->complete(std::move(*p)));
+      } catch (...) {
+        std::lock_guard<std::mutex> l(m_);
+        error_ = std::current_exception();
+        failed_ = true;
+        cv_.notify_all();
+        return;
+      }
+    }
+  }
+  ros_run::SiteRunner* site_;
+  std::function<void(bool)> done_;
+  std::thread thread_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::unique_ptr<ros_run::SiteRunner::Prepared> slot_;
+  bool closed_ = false, failed_ = false;
+  std::exception_ptr error_;
+};
 
 void printSiteFrame(const site::SiteFrame& f) {
   if (f.fused)
@@ -197,12 +264,19 @@ int runInduration(const IndurationRun& a) {
   ros_io::StereoPairs pairs;
   pairs.setLedger(&pairs_ledger);
   int fed = 0;
-  auto feed = [&](const sensor_msgs::Image::ConstPtr& l, const sensor_msgs::Image::ConstPtr& r) {
-    ++fed;
-    const bool ok = site ? site->onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg())
-                         : runner.onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg());
+  // --site: two threads, pair k+1 matched while pair k is measured and fused (in order: the same site)
+  SitePipeline pipeline(site.get(), [&](bool ok) {
     if (ok && !a.quiet) printFrame(*runner.last(), runner.frames(), expected);
     printSiteLines();
+  });
+  auto feed = [&](const sensor_msgs::Image::ConstPtr& l, const sensor_msgs::Image::ConstPtr& r) {
+    ++fed;
+    if (site) {
+      pipeline.push(site->prepare(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg()));
+      return;
+    }
+    if (runner.onStereo(*l, *pairs.leftInfoMsg(), *r, *pairs.rightInfoMsg()) && !a.quiet)
+      printFrame(*runner.last(), runner.frames(), expected);
   };
   const auto full = [&]() { return a.frames >= 0 && fed >= a.frames; };
   for (const rosbag::MessageInstance& mi : view) {
@@ -212,6 +286,7 @@ int runInduration(const IndurationRun& a) {
     while (!full() && pairs.next(&left, &right)) feed(left, right);
   }
   if (!full()) pairs.flush();  // the whole bag was read: what still waits for a partner is dropped (and counted)
+  pipeline.finish();
   ros_run::InputLedger dropped = runner.ledger();
   dropped.absorb(pairs_ledger);
   if (runner.frames() == 0)

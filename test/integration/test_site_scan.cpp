@@ -117,6 +117,26 @@ TEST_F(SiteScan, TheSkinTheFramesSeeIsFused) {
   EXPECT_GE(r["coverage"].as<double>(), 0.95);
 }
 
+TEST_F(SiteScan, TheReportHasASitePage) {
+  ASSERT_EQ(status_, 0);
+  const std::string html = dir_ + "/report.html";
+  ASSERT_EQ(run("PYTHONPATH=" + std::string(SKIN3D_SOURCE_DIR) + "/src /usr/bin/python3 " + std::string(SKIN3D_SOURCE_DIR) +
+                "/scripts/report.py --out " + html + " " + out_),
+            0);
+  std::ifstream in(html);
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find("site scan (5 pairs fused, 0 left out)"), std::string::npos);
+  // every site plaque's top as site.yaml has it, and the sweep's truth beside it
+  const YAML::Node site = YAML::LoadFile(out_ + "/site.yaml");
+  for (const auto& p : site["plaques"]) {
+    char top[32];
+    std::snprintf(top, sizeof(top), "%.4f ± ", p["top_height_mm"].as<double>());
+    EXPECT_NE(page.find(top), std::string::npos) << top;
+  }
+  EXPECT_NE(page.find("The sweep's truth: "), std::string::npos);
+  EXPECT_NE(page.find("Coverage: pairs fused per cell"), std::string::npos);
+}
+
 TEST_F(SiteScan, WithoutPosesItSaysWhatIsMissing) {
   ASSERT_EQ(status_, 0);
   // the default pose topic (slam/odometry) is not in a simulated sweep: exit 1 naming it and --site-poses

@@ -31,6 +31,7 @@ struct FrameMeasurement {
   stereo::DenseCloud cloud;          //!< organised like the left rectified image, left optical frame
   cv::Mat left_rect;                 //!< the rectified left image (mono8)
   double seconds_rectify = 0, seconds_range = 0, seconds_match = 0, seconds_triangulate = 0, seconds_measure = 0;
+  std::string range_note;            //!< why the depth range search found nothing (empty: it did, or it was set)
 };
 
 class FrameMeasurer {
@@ -43,6 +44,13 @@ class FrameMeasurer {
    *  @throws std::invalid_argument for a pair that cannot be processed (sizes, calibration), naming why. */
   FrameMeasurement measure(const cv::Mat& left_raw, const cv::Mat& right_raw, const geometry::CameraInfo& left,
                            const geometry::CameraInfo& right, double stamp);
+  /** @brief measure()'s first half: rectification, the depth range, dense matching and the cloud (not the
+   *  induration measurement). Not thread-safe (it keeps the rectification); finish() may run on another thread. */
+  FrameMeasurement match(const cv::Mat& left_raw, const cv::Mat& right_raw, const geometry::CameraInfo& left,
+                         const geometry::CameraInfo& right, double stamp);
+  /** @brief measure()'s second half on match()'s result: the reference, the plaques, the record. Thread-safe
+   *  (reads only the options): a pipeline measures one pair while it matches the next. */
+  void finish(FrameMeasurement* m) const;
 
  private:
   PipelineOptions options_;

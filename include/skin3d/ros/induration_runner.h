@@ -50,6 +50,13 @@ class IndurationRunner {
   bool onStereo(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
                 const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info);
 
+  /** @brief onStereo() in two halves, for a pipeline that matches one pair while it measures the one before:
+   *  match() checks the pair (a bad one is dropped through the ledger: nullptr) and matches it (one thread at a time);
+   *  complete() measures it and keeps it as onStereo() does (thread-safe; in the order the pairs came). */
+  std::unique_ptr<induration::FrameMeasurement> match(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
+                                                      const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info);
+  bool complete(std::unique_ptr<induration::FrameMeasurement> m, const std_msgs::Header& left_header);
+
   /** @brief Writes the results directory (induration/frame_measurer.h); induration.yaml ends with
    *  frames_dropped and dropped_input (by fault), with `upstream`'s drops (process_bag's pairing) counted too.
    *  @return false with the reason in `message`. */
@@ -73,7 +80,9 @@ class IndurationRunner {
                   const std::string& source, const InputLedger* upstream);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
+  std::mutex serial_mutex_;  // onStereo(): one pair after the other, in order
   mutable std::mutex mutex_;
+  std::mutex match_mutex_;  // match(): the measurer's rectification, one pair at a time
   RunLog log_;
   InputLedger ledger_;
   RunnerStatus status_;

@@ -74,6 +74,17 @@ class SiteRunner {
    *  records it as left out), then fused when its pose is known, else held for it. @return whether it was measured. */
   bool onStereo(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
                 const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info);
+  /** @brief A pair matched (and its features found), not yet measured: onStereo()'s first half. */
+  struct Prepared {
+    std_msgs::Header header;
+    std::unique_ptr<induration::FrameMeasurement> measurement;  // nullptr: the pair could not be matched
+    std::vector<stereo::StereoLandmark> landmarks;
+  };
+  /** @brief onStereo() in two halves, for a pipeline that matches one pair while it measures and fuses the one
+   *  before (process_bag): prepare() one pair at a time, complete() in the order the pairs came (the same site). */
+  Prepared prepare(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
+                   const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info);
+  bool complete(Prepared prepared);
   /** @brief The rig's pose at `stamp`: world <- the left optical frame. Fuses the pairs that waited for it. */
   void onPose(double stamp, const Eigen::Isometry3d& T_W_C);
   /** @brief Fuses what can be, leaves the pairs still waiting for a pose out (named). */
@@ -111,7 +122,9 @@ class SiteRunner {
   bool saveLocked(const std::string& dir, std::string* message, const std::vector<std::string>& command_line,
                   const std::string& source, const InputLedger* upstream, site::SiteResult* result);
 
-  mutable std::mutex mutex_;        // the fusion and the waiting pairs (held while a pair is measured and fused)
+  std::mutex serial_mutex_;  // onStereo(): one pair after the other, in order
+  mutable std::mutex mutex_;        // the fusion and the waiting pairs (held while a pair is fused)
+  std::mutex prepare_mutex_;        // prepare(): the front end's rectification, one pair at a time
   mutable std::mutex pose_mutex_;   // the pose buffer (poses come while a pair is measured)
   RunLog log_;
   SiteRunOptions run_;

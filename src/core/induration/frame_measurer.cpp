@@ -56,6 +56,14 @@ FrameMeasurer::FrameMeasurer(const PipelineOptions& options) : options_(options)
 FrameMeasurement FrameMeasurer::measure(const cv::Mat& left_raw, const cv::Mat& right_raw,
                                         const geometry::CameraInfo& left, const geometry::CameraInfo& right,
                                         double stamp) {
+  FrameMeasurement m = match(left_raw, right_raw, left, right, stamp);
+  finish(&m);
+  return m;
+}
+
+FrameMeasurement FrameMeasurer::match(const cv::Mat& left_raw, const cv::Mat& right_raw,
+                                      const geometry::CameraInfo& left, const geometry::CameraInfo& right,
+                                      double stamp) {
   using Clock = std::chrono::steady_clock;
   const auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
   const auto t0 = Clock::now();
@@ -90,17 +98,24 @@ FrameMeasurement FrameMeasurer::measure(const cv::Mat& left_raw, const cv::Mat& 
   t1 = Clock::now();
   m.cloud = stereo::triangulateDisparity(m.disparity, left, right);
   m.seconds_triangulate = since(t1);
-  t1 = Clock::now();
   m.record.stamp = stamp;
-  m.record.result = measureInduration(m.cloud, options_.induration);
-  m.seconds_measure = since(t1);
-  for (const auto& w : m.disparity.warnings)
-    m.record.result.warnings.insert(m.record.result.warnings.begin(), "dense stereo: " + w);
-  if (!range_note.empty()) m.record.result.warnings.insert(m.record.result.warnings.begin(), "dense stereo: " + range_note);
-  m.record.valid_fraction = m.disparity.valid_fraction;  // known disparity / the matched region
-  verticalDisparity(m.disparity, &m.record);
+  m.range_note = range_note;
   m.record.seconds = since(t0);
   return m;
+}
+
+void FrameMeasurer::finish(FrameMeasurement* m) const {
+  using Clock = std::chrono::steady_clock;
+  const auto t1 = Clock::now();
+  m->record.result = measureInduration(m->cloud, options_.induration);
+  m->seconds_measure = std::chrono::duration<double>(Clock::now() - t1).count();
+  for (const auto& w : m->disparity.warnings)
+    m->record.result.warnings.insert(m->record.result.warnings.begin(), "dense stereo: " + w);
+  if (!m->range_note.empty())
+    m->record.result.warnings.insert(m->record.result.warnings.begin(), "dense stereo: " + m->range_note);
+  m->record.valid_fraction = m->disparity.valid_fraction;  // known disparity / the matched region
+  verticalDisparity(m->disparity, &m->record);
+  m->record.seconds += m->seconds_measure;
 }
 
 void writeMeasurementResults(const std::string& dir, const std::vector<FrameRecord>& frames,

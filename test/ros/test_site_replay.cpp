@@ -9,7 +9,7 @@
  * max(20 um, 3 x its stated sigma), its PASI class right; no site plaque that no true plaque claims.
  *
  * Parameters (private): ~truth, ~results (the nodelet's ~results), ~frames (pairs in the bag), ~timeout (s of wall
- * time for all the pairs).
+ * time for all the pairs), ~poses (the nodelet's: ground_truth/pose or tf).
  */
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -17,12 +17,16 @@
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <skin3d/SaveResults.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <skin3d/SiteFrameReport.h>
+#include <tf2_ros/transform_broadcaster.h>
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Core>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -141,6 +145,10 @@ TEST(SiteReplay, SavedSiteMatchesTheTruth) {
   const YAML::Node truth = YAML::LoadFile(truth_path);
   const YAML::Node site = YAML::LoadFile(dir + "/site.yaml");
   EXPECT_EQ(site["frame"].as<std::string>(""), "world");
+  std::string poses = "ground_truth/pose";  // the source site.yaml names
+  pnh.param<std::string>("poses", poses, poses);
+  EXPECT_NE(site["source"].as<std::string>("").find(poses == "tf" ? "TF (world)" : poses), std::string::npos)
+      << site["source"].as<std::string>("");
   EXPECT_EQ(site["surface"]["model"].as<std::string>(), "cylinder");
   // the frames agree where they overlap: with the generator's poses only the noise is left (under 10 um of rigid
   // disagreement at half resolution); a pose error, or points that are not skin, leave hundreds of um
@@ -181,6 +189,24 @@ int main(int argc, char** argv) {
   ros::Subscriber s1 = nh.subscribe("site/frame", 100, &Listener::onFrame, &listener);
   ros::Subscriber s2 = nh.subscribe("site/coverage", 2, &Listener::onCoverage, &listener);
   ros::Subscriber s3 = nh.subscribe("site/points", 2, &Listener::onPoints, &listener);
+  // ~poses: tf: the bag's poses (world <- stereo_left_optical_frame) republished as TF for the nodelet to look up
+  std::string poses;
+  ros::param::param<std::string>("~poses", poses, "ground_truth/pose");
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf;
+  ros::Subscriber s4;
+  if (poses == "tf") {
+    tf = std::make_unique<tf2_ros::TransformBroadcaster>();
+    s4 = nh.subscribe<geometry_msgs::PoseStamped>("ground_truth/pose", 1000, [&tf](const geometry_msgs::PoseStamped::ConstPtr& p) {
+      geometry_msgs::TransformStamped t;
+      t.header = p->header;
+      t.child_frame_id = "stereo_left_optical_frame";
+      t.transform.translation.x = p->pose.position.x;
+      t.transform.translation.y = p->pose.position.y;
+      t.transform.translation.z = p->pose.position.z;
+      t.transform.rotation = p->pose.orientation;
+      tf->sendTransform(t);
+    });
+  }
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();

@@ -378,20 +378,9 @@ void SiteRunner::attach(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std::st
     if (lock.owns_lock() && !waiting_.empty()) drainLocked(false);
   });
   srv_save_ = pnh.advertiseService<skin3d::SaveResults::Request, skin3d::SaveResults::Response>(
-      "save_results", [this](skin3d::SaveResults::Request& req, skin3d::SaveResults::Response& res) {
-        const std::string dir = req.directory.empty() ? results_ : req.directory;
-        if (dir.empty()) {
-          res.success = false;
-          res.message = "no directory given and ~results is not set";
-          return true;
-        }
-        res.success = save(dir, &res.message);
-        if (res.success)
-          log_.info(res.message);
-        else
-          log_.error(res.message);
-        return true;
-      });
+      "save_results", saveResultsHandler<skin3d::SaveResults::Request, skin3d::SaveResults::Response>(
+                          results_, [this](const std::string& dir, std::string* message) { return save(dir, message); },
+                          &log_));
   diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh);
   diagnostics_->setHardwareID("skin3d " + node_name);
   diagnostics_->add("site", this, &SiteRunner::diagnose);

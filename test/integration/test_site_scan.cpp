@@ -19,7 +19,11 @@
 #include <string>
 #include <vector>
 
+#include "site_truth.h"
+
 namespace {
+
+using skin3d_test::expectPlaquesMatchTheTruth;
 
 const std::string kMakeDataset = SKIN3D_MAKE_DATASET_BIN;
 const std::string kProcessBag = SKIN3D_PROCESS_BAG_BIN;
@@ -29,14 +33,6 @@ int run(const std::string& cmd) {
   std::fflush(stdout);
   const int rc = std::system(cmd.c_str());
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
-Eigen::Vector3d vec(const YAML::Node& n) { return Eigen::Vector3d(n[0].as<double>(), n[1].as<double>(), n[2].as<double>()); }
-
-int pasi(double mm) {
-  int k = 0;
-  for (double b : {0.125, 0.375, 0.625, 0.875}) k += mm >= b;
-  return k;
 }
 
 class SiteScan : public ::testing::Test {
@@ -56,42 +52,6 @@ class SiteScan : public ::testing::Test {
 };
 std::string SiteScan::dir_, SiteScan::bag_, SiteScan::out_;
 int SiteScan::status_ = -1;
-
-/** Every true plaque of at least 0.2 mm that some frame sees within 45 deg found exactly once, its top within
- *  max(20 um, 3 x its stated sigma), its PASI class right, seen by a view of its own; no site plaque that no true
- *  plaque claims. */
-void expectPlaquesMatchTheTruth(const YAML::Node& truth, const YAML::Node& site) {
-  const YAML::Node measured = site["plaques"];
-  std::vector<int> claimed(measured.size(), 0);
-  int required = 0;
-  for (std::size_t i = 0; i < truth["plaques"].size(); ++i) {
-    const YAML::Node p = truth["plaques"][i];
-    const double top = p["height_mm"].as<double>();
-    const double best_inc = truth["plaques_seen"][i]["best_incidence_deg"].as<double>();
-    const double reach = std::max(3e-3, std::sqrt(p["area_mm2"].as<double>() / M_PI) * 1e-3);
-    int match = -1, n = 0;
-    for (std::size_t j = 0; j < measured.size(); ++j)
-      if ((vec(measured[j]["centroid_m"]) - vec(p["centroid_left_m"])).norm() <= reach) {
-        ++claimed[j];
-        ++n;
-        match = static_cast<int>(j);
-      }
-    if (top < 0.2 || best_inc > 45) continue;
-    ++required;
-    ASSERT_EQ(n, 1) << "true plaque " << i << " (" << top << " mm, best incidence " << best_inc << " deg) is matched by " << n
-                    << " site plaques";
-    const YAML::Node m = measured[match];
-    const double err = m["top_height_mm"].as<double>() - top, sig = m["top_height_sigma_mm"].as<double>();
-    EXPECT_LE(std::fabs(err), std::max(0.020, 3 * sig)) << "plaque " << i << ": top " << m["top_height_mm"].as<double>()
-                                                       << " mm against " << top << " (sigma " << sig << ")";
-    EXPECT_EQ(m["pasi"].as<int>(), pasi(top)) << "plaque " << i;
-    EXPECT_GE(m["views"].as<int>(), 1) << "plaque " << i;
-  }
-  EXPECT_GE(required, 2) << "the sweep must hold plaques to measure";
-  for (std::size_t j = 0; j < measured.size(); ++j)
-    EXPECT_GE(claimed[j], 1) << "site plaque " << measured[j]["id"].as<int>() << " at "
-                             << vec(measured[j]["centroid_m"]).transpose() << " is no true plaque";
-}
 
 TEST_F(SiteScan, EveryPlaqueSeenWellIsMeasuredOnce) {
   ASSERT_EQ(status_, 0);

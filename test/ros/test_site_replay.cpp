@@ -31,6 +31,8 @@
 #include <string>
 #include <vector>
 
+#include "../integration/site_truth.h"
+
 namespace {
 
 struct Listener {
@@ -56,14 +58,6 @@ struct Listener {
 };
 
 Listener listener;
-
-Eigen::Vector3d vec(const YAML::Node& n) { return Eigen::Vector3d(n[0].as<double>(), n[1].as<double>(), n[2].as<double>()); }
-
-int pasi(double mm) {
-  int k = 0;
-  for (double b : {0.125, 0.375, 0.625, 0.875}) k += mm >= b;
-  return k;
-}
 
 }  // namespace
 
@@ -113,7 +107,8 @@ TEST(SiteReplay, EveryPairReachesTheSiteAndTheOperatorSeesIt) {
   const YAML::Node limb = YAML::LoadFile(truth_path)["limb"];
   ASSERT_TRUE(limb && limb["axis_point_left_m"] && limb["axis_direction_left"] && limb["semi_axes_mm"])
       << truth_path << " holds no limb axis (limb.axis_point_left_m, axis_direction_left, semi_axes_mm)";
-  const Eigen::Vector3d c = vec(limb["axis_point_left_m"]), a = vec(limb["axis_direction_left"]).normalized();
+  const Eigen::Vector3d c = skin3d_test::vec(limb["axis_point_left_m"]);
+  const Eigen::Vector3d a = skin3d_test::vec(limb["axis_direction_left"]).normalized();
   const double r_min = 1e-3 * std::min(limb["semi_axes_mm"][0].as<double>(), limb["semi_axes_mm"][1].as<double>());
   const double r_max = 1e-3 * std::max(limb["semi_axes_mm"][0].as<double>(), limb["semi_axes_mm"][1].as<double>());
   sensor_msgs::PointCloud2ConstIterator<float> x(pc, "x"), h(pc, "height");
@@ -153,33 +148,7 @@ TEST(SiteReplay, SavedSiteMatchesTheTruth) {
   // the frames agree where they overlap: with the generator's poses only the noise is left (under 10 um of rigid
   // disagreement at half resolution); a pose error, or points that are not skin, leave hundreds of um
   EXPECT_LT(site["seams"]["rigid_um"].as<double>(), 25.0);
-  const YAML::Node measured = site["plaques"];
-  std::vector<int> claimed(measured.size(), 0);
-  int required = 0;
-  for (std::size_t i = 0; i < truth["plaques"].size(); ++i) {
-    const YAML::Node p = truth["plaques"][i];
-    const double top = p["height_mm"].as<double>();
-    const double best_inc = truth["plaques_seen"][i]["best_incidence_deg"].as<double>();
-    const double reach = std::max(3e-3, std::sqrt(p["area_mm2"].as<double>() / M_PI) * 1e-3);
-    int match = -1, n = 0;
-    for (std::size_t j = 0; j < measured.size(); ++j)
-      if ((vec(measured[j]["centroid_m"]) - vec(p["centroid_left_m"])).norm() <= reach) {
-        ++claimed[j];
-        ++n;
-        match = static_cast<int>(j);
-      }
-    if (top < 0.2 || best_inc > 45) continue;
-    ++required;
-    ASSERT_EQ(n, 1) << "true plaque " << i << " (" << top << " mm) is matched by " << n << " site plaques";
-    const YAML::Node m = measured[match];
-    const double err = m["top_height_mm"].as<double>() - top, sig = m["top_height_sigma_mm"].as<double>();
-    EXPECT_LE(std::fabs(err), std::max(0.020, 3 * sig)) << "plaque " << i << ": top " << m["top_height_mm"].as<double>()
-                                                       << " mm against " << top;
-    EXPECT_EQ(m["pasi"].as<int>(), pasi(top)) << "plaque " << i;
-  }
-  EXPECT_GE(required, 2) << "the sweep must hold plaques to measure";
-  for (std::size_t j = 0; j < measured.size(); ++j)
-    EXPECT_GE(claimed[j], 1) << "site plaque " << measured[j]["id"].as<int>() << " is no true plaque";
+  skin3d_test::expectPlaquesMatchTheTruth(truth, site);
 }
 
 int main(int argc, char** argv) {

@@ -64,6 +64,27 @@ class RunLog {
 /** @brief A log into ROS's (rosout) under `name`: what a nodelet's runner uses. */
 RunLog rosLog(const std::string& name, double throttle_s = 2.0);
 
+/** @brief How a runner writes its results when asked: into `dir`, false with the reason in `message`. */
+using SaveFunction = std::function<bool(const std::string& dir, std::string* message)>;
+/** @brief The ~save_results service's handler (skin3d/SaveResults): the request's directory, else `results` (both
+ *  empty: refused, saying so); the outcome logged (info or error) through `log` when given. A runner advertises it as
+ *  pnh.advertiseService<skin3d::SaveResults::Request, skin3d::SaveResults::Response>("save_results", handler). */
+template <class Request, class Response>
+std::function<bool(Request&, Response&)> saveResultsHandler(std::string results, SaveFunction save, const RunLog* log) {
+  return [results, save, log](Request& req, Response& res) {
+    const std::string dir = req.directory.empty() ? results : req.directory;
+    if (dir.empty()) {
+      res.success = false;
+      res.message = "no directory given and ~results is not set";
+      return true;
+    }
+    res.success = save(dir, &res.message);
+    if (log && res.success) log->info(res.message);
+    if (log && !res.success) log->error(res.message);
+    return true;
+  };
+}
+
 /** @brief The one place that drops bad input: counted per fault, logged (throttled), kept for the results. */
 class InputLedger {
  public:

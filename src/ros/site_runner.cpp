@@ -94,18 +94,6 @@ SiteRunner::~SiteRunner() {
   }
 }
 
-int SiteRunner::framesFused() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  int n = 0;
-  for (const auto& f : fusion_.frames()) n += f.fused;
-  return n;
-}
-
-int SiteRunner::framesWaiting() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return static_cast<int>(waiting_.size());
-}
-
 bool SiteRunner::onStereo(const sensor_msgs::Image& li, const sensor_msgs::CameraInfo& lc,
                           const sensor_msgs::Image& ri, const sensor_msgs::CameraInfo& rc) {
   std::lock_guard<std::mutex> serial(serial_mutex_);  // live callbacks on several threads: one pair after the other

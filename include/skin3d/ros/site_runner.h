@@ -99,8 +99,6 @@ class SiteRunner {
   void onFrame(std::function<void(const site::SiteFrame&)> callback) { on_frame_ = std::move(callback); }
   /** @brief The per-pair measurement (frames measured, the last one's maps, its drops). */
   IndurationRunner& measurer() { return measurer_; }
-  int framesFused() const;
-  int framesWaiting() const;
 
  private:
   struct Pending {

@@ -32,6 +32,18 @@ struct Round {
   }
 };
 
+/** Healthy relief like the skin generator's: a Gaussian cross-section of sigma `width` along a segment of `length`
+ *  (rounded ends), at angle `angle` from the u axis. */
+struct Relief {
+  double u, v, angle, length, width, height;  // m, m, rad, m, m, m
+  double at(double uu, double vv) const {
+    const double c = std::cos(angle), sn = std::sin(angle), du = uu - u, dv = vv - v;
+    const double along = c * du + sn * dv, across = -sn * du + c * dv;
+    const double beyond = std::max(0.0, std::fabs(along) - 0.5 * length);
+    return height * std::exp(-0.5 * (across * across + beyond * beyond) / (width * width));
+  }
+};
+
 struct Scene {
   Eigen::Vector3d origin = Eigen::Vector3d(0, 0, 0.25);  // surface point on the optical axis
   Eigen::Vector3d normal, e1, e2;                         // normal towards the camera
@@ -39,6 +51,7 @@ struct Scene {
   double ridge = 0.0, ridge_width = 0.006, ridge_u = 0.0; // m: a ridge along v (a nose, a fold): ridge exp(-du^2/2w^2)
   std::vector<Box> boxes;
   std::vector<Round> rounds;
+  std::vector<Relief> reliefs;
   double noise = 5e-6;                                    // m along the ray
   double noise_blur_px = 0.0;  // > 0: the noise is correlated like a matcher's, white noise blurred by a Gaussian of
                                // this sigma and scaled back to `noise` (its correlation area is 4 pi sigma^2 px^2)
@@ -63,6 +76,7 @@ struct Scene {
     for (const auto& b : boxes)
       if (std::fabs(u - b.u) <= b.half && std::fabs(v - b.v) <= b.half) h += b.height;
     for (const auto& r : rounds) h += r.at(u, v);
+    for (const auto& r : reliefs) h += r.at(u, v);
     return h;
   }
   /** Ray-surface intersection by fixed-point iteration on the height (the surface is nearly flat). */
@@ -233,6 +247,75 @@ TEST(Induration, ASurfaceTheReferenceCannotFollowIsReported) {
       EXPECT_TRUE(right) << "the plaque on flat skin away from the ridge";
     }
   }
+}
+
+// Healthy relief is not a plaque. Psoriatic plaques are sharply demarcated (the skin rises to the plateau over a
+// border ramp of at most 2 mm); relief rises smoothly (a Gaussian cross-section). Ridges of 2.5-4 mm sigma, 1-3 mm
+// high and a fold (two ridges 9 mm apart) among plaques with 0.5-2 mm ramps, flat and domed tops, on skin whose
+// noise is correlated like a matcher's: every plaque is found and measured right (top within 2 % + 5 um), no
+// plaque lies on the relief, the relief is marked (relief, unfollowed) and a warning says so. Fails without the
+// border rule: each ridge is taken for a plaque 1-3 mm high.
+TEST(Induration, HealthyReliefIsNotTakenForAPlaque) {
+  Scene s;
+  s.width = 900;
+  s.height = 700;
+  s.f = 1600;  // about 0.16 mm per pixel
+  s.noise = 20e-6;
+  s.noise_blur_px = 2.0;
+  s.rounds = {{-0.030, -0.020, 0.005, 0.3e-3, 0.5e-3, 0.0}, {-0.030, 0.015, 0.006, 0.6e-3, 2.0e-3, 0.0},
+              {0.020, 0.005, 0.007, 0.8e-3, 1.5e-3, 0.5}, {-0.002, 0.0, 0.005, 0.15e-3, 1.0e-3, 0.0}};
+  s.reliefs = {{0.0, -0.020, 0.3, 0.025, 0.004, 3e-3},   // a nose's side
+               {0.0, 0.022, -0.2, 0.020, 0.0025, 1e-3},  // a tendon
+               {0.045, 0.0, 1.5, 0.022, 0.0025, 1.2e-3}, {0.054, 0.0, 1.5, 0.022, 0.0025, 1.2e-3}};  // a fold
+  // a plaque on the nose's flank: measured right or in the region marked
+  const Round on_relief{0.004, -0.013, 0.005, 0.4e-3, 1.0e-3, 0.0};
+  Scene with = s;
+  with.rounds.push_back(on_relief);
+  const auto r = measureInduration(with.cloud(), IndurationOptions());
+  ASSERT_TRUE(r.reference_ok);
+  for (const auto& w : r.warnings) std::printf("warning: %s\n", w.c_str());
+  for (const auto& p : r.plaques) {
+    const Eigen::Vector3d q = p.centroid - s.origin;
+    std::printf("plaque at u %.1f v %.1f mm: top %.3f mm, area %.0f mm^2, border %.2f mm\n", q.dot(s.e1) * 1e3, q.dot(s.e2) * 1e3,
+                p.top_height * 1e3, p.area * 1e6, p.border_width * 1e3);
+  }
+  const auto pixelOf = [&](double u, double v) {
+    const Eigen::Vector3d c = s.origin + u * s.e1 + v * s.e2 + s.surface(u, v) * s.normal;
+    return cv::Point(static_cast<int>(std::lround(s.f * c.x() / c.z() + s.width / 2.0)),
+                     static_cast<int>(std::lround(s.f * c.y() / c.z() + s.height / 2.0)));
+  };
+  for (const Round& t : s.rounds) {
+    const Eigen::Vector3d c = s.origin + t.u * s.e1 + t.v * s.e2;
+    const induration::Plaque* best = nullptr;
+    for (const auto& p : r.plaques)
+      if ((p.centroid - c).norm() < 3e-3) best = &p;
+    ASSERT_NE(best, nullptr) << "plaque of " << t.height * 1e3 << " mm (ramp " << t.ramp * 1e3 << " mm, dome " << t.dome
+                             << ") not found";
+    std::printf("plaque %.2f mm, ramp %.1f mm, dome %.1f: top %.4f mm, border %.2f mm\n", t.height * 1e3, t.ramp * 1e3,
+                t.dome, best->top_height * 1e3, best->border_width * 1e3);
+    EXPECT_NEAR(best->top_height, t.height, 0.02 * t.height + 5e-6);
+  }
+  {
+    const Eigen::Vector3d c = s.origin + on_relief.u * s.e1 + on_relief.v * s.e2;
+    const induration::Plaque* best = nullptr;
+    for (const auto& p : r.plaques)
+      if ((p.centroid - c).norm() < 3e-3) best = &p;
+    const cv::Point px = pixelOf(on_relief.u, on_relief.v);
+    const bool right = best && std::fabs(best->top_height - on_relief.height) <= 0.02 * on_relief.height + 5e-6;
+    EXPECT_TRUE(right || (best == nullptr && r.unfollowed.at<uchar>(px) != 0))
+        << "the plaque on the relief is neither measured right nor marked";
+  }
+  EXPECT_LE(r.plaques.size(), s.rounds.size() + 1) << "a plaque on the relief";
+  ASSERT_FALSE(r.relief.empty()) << "no relief marked";
+  for (const Relief& q : s.reliefs) {
+    const cv::Point px = pixelOf(q.u, q.v);
+    ASSERT_TRUE(cv::Rect(0, 0, s.width, s.height).contains(px));
+    EXPECT_EQ(r.labels.at<int>(px), 0) << "relief at u = " << q.u * 1e3 << " mm taken for a plaque";
+    EXPECT_NE(r.unfollowed.at<uchar>(px), 0) << "relief at u = " << q.u * 1e3 << " mm not marked";
+  }
+  bool said = false;
+  for (const auto& w : r.warnings) said |= w.find("not plaque-like") != std::string::npos;
+  EXPECT_TRUE(said) << "no warning names the relief";
 }
 
 TEST(Induration, TopHeightOfFlatAndDomedPlaques) {

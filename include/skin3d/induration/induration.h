@@ -172,6 +172,11 @@ struct Plaque {
    *  across it): above 0.1 the plaque may extend there (a warning says so), and its area is what was measured */
   double outline_unmeasured = 0;
   double volume = 0;           //!< m^3, sum of height x footprint over the measured pixels / measured_fraction
+  /** m on the skin: how wide the lower part of the border is, from 20 to 50 % of the rise from the skin around to
+   *  the top (on a plaque's border ramp of at most 2 mm, blurred by the matcher; healthy relief rises from a longer
+   *  foot: above 1.75 times a plaque's widest a raised region is relief, not a plaque). NaN where the profile was
+   *  too short to tell. */
+  double border_width = std::numeric_limits<double>::quiet_NaN();
   cv::Rect bbox;               //!< in the image
 };
 
@@ -196,6 +201,9 @@ struct IndurationResult {
   bool reference_follows = true;
   double unfollowed_share = 0;     //!< that share of the working band
   cv::Mat unfollowed;              //!< CV_8U: 255 where it does not follow (empty: nowhere)
+  /** CV_8U: 255 on raised regions that are relief, not plaques (Plaque::border_width: a smooth rise, or two tops);
+   *  part of `unfollowed` (empty: none) */
+  cv::Mat relief;
   /** The healthy skin's robust scatter about the reference over the matcher's median stated depth sigma (1: the
    *  reference explains the skin down to the noise; skin relief and model error raise it). */
   double reference_noise_ratio = std::numeric_limits<double>::quiet_NaN();

@@ -85,6 +85,7 @@ void checkReferenceFollows(const Surface& s, const cv::Mat& hs, const cv::Mat& b
     if (r > 0) cv::erode(bodies, bodies, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
   }
   res.unfollowed = largeRegions(off & bodies, s.cloud.ray, res.reference, 4 * o.min_area);
+  if (!res.relief.empty()) res.unfollowed |= res.relief;  // raised regions shaped like relief (findPlaques)
   const int n_off = cv::countNonZero(res.unfollowed);
   res.unfollowed_share = n_off / static_cast<double>(std::max(1, cv::countNonZero(band & bodies)));
   res.reference_follows = res.unfollowed_share <= kMaxUnfollowedShare;

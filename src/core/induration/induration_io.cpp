@@ -156,6 +156,7 @@ void emitPlaque(YAML::Emitter& y, const Plaque& p) {
   y << YAML::Key << "pixels" << YAML::Value << p.pixels;
   y << YAML::Key << "measured_share" << YAML::Value << p.measured_fraction;
   y << YAML::Key << "outline_unmeasured_share" << YAML::Value << p.outline_unmeasured;
+  y << YAML::Key << "border_width_mm" << YAML::Value << p.border_width * 1e3;
   y << YAML::Key << "volume_mm3" << YAML::Value << p.volume * 1e9;
   y << YAML::Key << "bbox_px" << YAML::Value << YAML::Flow << YAML::BeginSeq << p.bbox.x << p.bbox.y << p.bbox.width
     << p.bbox.height << YAML::EndSeq;

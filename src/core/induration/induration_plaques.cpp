@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Induration measurement: the plaque search. See include/skin3d/induration/induration.h.
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -35,6 +37,36 @@ constexpr double kWideMeasuredShare = 0.8;
 /** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
 constexpr double kMinEllipseFill = 0.5;
 
+/** A psoriatic plaque is plateau-like and sharply demarcated: across its border the skin rises to the plateau
+ *  within about 2 mm (kHalfRamp), a step, blurred by the matcher. The lower part of the step, from 20 to 50 % of the
+ *  rise from the skin around to the top, lies on that step as long as the plateau's edge stands at least half the
+ *  top (flat tops, and domes up to half the height), and spans 0.21 of the ramp (a smooth step) widened by the blur:
+ *  20-50 % of a step blurred by a Gaussian of sigma s spans 0.84 s, and s follows from the height noise's
+ *  correlation area (4 pi s^2). Healthy relief (a fold, a ridge, a nose, a tendon) rises smoothly from a long foot:
+ *  a Gaussian cross-section of sigma w spans 0.62 w there, 1.2-2.5 mm for the 2-4 mm of a nose's side or a fold.
+ *  A raised region whose 20-50 % rise spans more than this factor times a plaque's widest is relief, not a plaque.
+ *  The factor leaves room for what the model leaves out: a matcher's window straddling a step widens it more than
+ *  its noise's correlation says, and an outline that is not round mixes distances; on the rendered limb's plaques
+ *  (two full-resolution sweeps, about 100 profiles) the span reached 1.4 times the model, relief 2-4 times it. */
+constexpr double kMaxBorderFactor = 1.75;
+/** A raised region that falls inward by more than this share of its rise after its highest level has two tops
+ *  (the two sides of a fold, two ridges): a plaque's top is one plateau, flat or domed. */
+constexpr double kMaxInwardDip = 0.5;
+/** The border's shape is judged only where the rise stands this many standard errors of the profile above the
+ *  profile's noise: a low plaque on a noisy rig keeps the benefit of the doubt. */
+constexpr double kBorderClear = 10.0;
+
+/** The shape of a raised region's border (PlaqueSearch::borderShape). */
+struct BorderShape {
+  double width = std::numeric_limits<double>::quiet_NaN();  //!< m on the skin: 20 -> 50 % of the rise
+  double limit = std::numeric_limits<double>::quiet_NaN();  //!< m: the widest a plaque's border may be
+  double dip = 0;      //!< share of the rise lost inward of the highest level
+  double rise = 0;     //!< m: top level over the skin around
+  double reach = 0;    //!< m: from the outline out to where the rise falls under the detection threshold
+  bool clear = false;  //!< the rise stands kBorderClear profile errors above the noise
+  bool relief() const { return clear && (width > limit || dip > kMaxInwardDip); }
+};
+
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
   double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
@@ -63,6 +95,8 @@ class PlaqueSearch {
     join_ = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * jr + 1, 2 * jr + 1));
     off_band_ = s.known_mask & ~band;  // measured, but seen too obliquely
     final_labels_ = cv::Mat(s.xyz.size(), CV_32S, cv::Scalar(0));
+    relief_mask_ = cv::Mat(s.xyz.size(), CV_8U, cv::Scalar(0));
+    relief_cores_ = cv::Mat(s.xyz.size(), CV_8U, cv::Scalar(0));
   }
 
   /** At each scale, draws every core, largest first: a plaque whose core the matcher cut in two (an occlusion
@@ -93,9 +127,31 @@ class PlaqueSearch {
       std::stable_sort(cores.begin(), cores.end(),
                        [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
       for (const int k : cores) drawCore(k);
+      // relief found: the rest of its core (beyond the relief's skirt) is searched again, at most twice; the cores
+      // the relief was not part of were drawn already
+      for (int again = 0; again < 2 && relief_found_ > 0; ++again) {
+        relief_found_ = 0;
+        above.setTo(0, relief_mask_);
+        const cv::Mat was_relief = relief_cores_.clone();
+        relief_cores_.setTo(0);
+        n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
+        std::vector<char> near(n_, 0);
+        for (int y = 0; y < lab_.rows; ++y)
+          for (int x = 0; x < lab_.cols; ++x)
+            if (was_relief.at<uchar>(y, x)) near[lab_.at<int>(y, x)] = 1;
+        std::vector<int> rest;
+        for (int k = 1; k < n_; ++k)
+          if (near[k]) rest.push_back(k);
+        std::stable_sort(rest.begin(), rest.end(),
+                         [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
+        for (const int k : rest) drawCore(k);
+      }
+      relief_found_ = 0;
+      relief_cores_.setTo(0);
     }
     renumberByArea();
     warnIgnored();
+    if (!relief_.empty()) res_.relief = relief_mask_;
   }
 
  private:
@@ -104,6 +160,7 @@ class PlaqueSearch {
     const cv::Rect bb(stats_.at<int>(k, cv::CC_STAT_LEFT), stats_.at<int>(k, cv::CC_STAT_TOP),
                       stats_.at<int>(k, cv::CC_STAT_WIDTH), stats_.at<int>(k, cv::CC_STAT_HEIGHT));
     if (takenAlready(k, bb)) return;  // part of a plaque drawn already
+    if (inRelief(k, bb)) return;      // relief found already (at an earlier scale)
     double edge = 0, ceiling = 0;
     bool limited = false;
     if (!coreLevels(k, bb, &edge, &ceiling, &limited)) return;
@@ -165,7 +222,28 @@ class PlaqueSearch {
                                         num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
       return;
     }
-    addPlaque(box, foot, sums, limited, replace);
+    // a plaque is sharply demarcated and has one top; a smooth, bell-like rise or two tops is relief (kMaxBorderFactor)
+    const BorderShape border = borderShape(k, box, foot.pixels, local);
+    if (border.relief()) {
+      // the relief and its skirt above the threshold: no plaque can be measured there; the rest of the core (a
+      // plaque beside the relief, joined to it by the skirt) is searched again (run)
+      // (a ring of its skirt, searched again with the relief inside it filled, is that relief: listed once)
+      int overlap = 0;
+      for (int y = 0; y < box.height; ++y)
+        for (int x = 0; x < box.width; ++x) overlap += foot.pixels.at<uchar>(y, x) && relief_mask_.at<uchar>(y + box.y, x + box.x);
+      markRelief(box, foot.pixels, border.reach, local);
+      relief_cores_(bb).setTo(255, lab_(bb) == k);
+      ++relief_found_;
+      if (4 * overlap > sums.px) return;
+      relief_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", rising " +
+                                        num(std::round(border.rise * 1e5) / 100) + " mm" +
+                                        (border.dip > kMaxInwardDip ? " with two tops"
+                                                                    : ", its border " + num(std::round(border.width * 1e4) / 10) +
+                                                                          " mm wide (a plaque's: up to " +
+                                                                          num(std::round(border.limit * 1e4) / 10) + " mm)"));
+      return;
+    }
+    addPlaque(box, foot, sums, limited, replace, border.width);
   }
 
   /** Pixels of `m` over the area of the ellipse of its second moments (4 pi sqrt of their eigenvalues' product: a
@@ -204,6 +282,49 @@ class PlaqueSearch {
           taken += this->taken(final_labels_.at<int>(y, x));
         }
     return 2 * taken >= in_core;
+  }
+
+  /** Marks the footprint `fp` (in `box`) grown by `reach` (m on the tangent plane `local`; at most 300 px) as relief. */
+  void markRelief(const cv::Rect& box, const cv::Mat& fp, double reach, const ReferenceSurface& local) {
+    const Eigen::Matrix2d J = pixelOnPlane(box, local, std::max(1, std::min(box.width, box.height) / 4));
+    const double px_m = J.allFinite() ? Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1) : 0.0;
+    const int r = px_m > 0 ? static_cast<int>(std::ceil(std::min(300.0, reach / px_m))) : 0;
+    const cv::Rect win = cv::Rect(box.x - r, box.y - r, box.width + 2 * r, box.height + 2 * r) & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
+    cv::Mat m = cv::Mat::zeros(win.size(), CV_8U);
+    fp.copyTo(m(box - win.tl()), fp);
+    if (r > 0) cv::dilate(m, m, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+    relief_mask_(win).setTo(255, m & band_(win));
+  }
+
+  /** The image's pixels on the tangent plane `local` at the centre of `box` (m per px, in an orthonormal basis of the
+   *  plane: the rays through the centre and through points `step` px beside it, met with the plane). */
+  Eigen::Matrix2d pixelOnPlane(const cv::Rect& box, const ReferenceSurface& local, int step) const {
+    auto onPlane = [&](double u, double v) {
+      const int ui = std::clamp(static_cast<int>(std::lround(u)), 0, s_.xyz.cols - 1);
+      const int vi = std::clamp(static_cast<int>(std::lround(v)), 0, s_.xyz.rows - 1);
+      const cv::Vec3f& q = s_.cloud.ray.at<cv::Vec3f>(vi, ui);
+      const Eigen::Vector3d ray(q[0], q[1], q[2]);
+      return Eigen::Vector3d(-local.d / local.normal.dot(ray) * ray);
+    };
+    const double cu = box.x + 0.5 * box.width, cv0 = box.y + 0.5 * box.height;
+    const Eigen::Vector3d X0 = onPlane(cu, cv0), du = (onPlane(cu + step, cv0) - X0) / step,
+                          dv = (onPlane(cu, cv0 + step) - X0) / step;
+    const Eigen::Vector3d b1 = du.normalized(), b2 = local.normal.cross(b1).normalized();
+    Eigen::Matrix2d J;
+    J << b1.dot(du), b1.dot(dv), b2.dot(du), b2.dot(dv);
+    return J;
+  }
+
+  /** True when at least half of core k lies in relief found already. */
+  bool inRelief(int k, const cv::Rect& bb) const {
+    int in_core = 0, in_relief = 0;
+    for (int y = bb.y; y < bb.y + bb.height; ++y)
+      for (int x = bb.x; x < bb.x + bb.width; ++x)
+        if (lab_.at<int>(y, x) == k) {
+          ++in_core;
+          in_relief += relief_mask_.at<uchar>(y, x) != 0;
+        }
+    return 2 * in_relief >= in_core;
   }
 
   /** The core's edge level (edge_fraction of its median height, at least the threshold) and its ceiling; false
@@ -365,6 +486,154 @@ class PlaqueSearch {
     return t;
   }
 
+  /** The shape of the border of the region `fp` (in `box`) of core k, on the skin: the window around it is
+   *  resampled (nearest pixel) onto a square grid on the reference's tangent plane `local` at the region (an affine
+   *  map from the rays through the box centre and its neighbours: an oblique view's pixels are longer across the
+   *  limb than along it), and the heights (unsmoothed) are binned by their signed distance to the outline there,
+   *  from as far outside as the region is deep (the foot of a bell lies outside a half-height outline) to its
+   *  deepest point; outside, only the working band's skin on no plaque and no other core. The levels are the
+   *  median of the outer half of the outside bins (the skin around) and the highest of the inside bins (3-bin
+   *  running means); the crossings of 20 and 50 % of the rise are the first, scanning inward. */
+  BorderShape borderShape(int k, const cv::Rect& box, const cv::Mat& fp, const ReferenceSurface& local) const {
+    BorderShape out;
+    cv::Mat din;
+    cv::distanceTransform(fp, din, cv::DIST_L2, cv::DIST_MASK_5);
+    double dmax = 0;
+    cv::minMaxLoc(din, nullptr, &dmax);
+    if (dmax < 3) return out;
+    const int r = static_cast<int>(std::ceil(std::min(2 * dmax, 300.0))) + 2;
+    const cv::Rect win = cv::Rect(box.x - r, box.y - r, box.width + 2 * r, box.height + 2 * r) & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
+    // the window's pixels: inside (1), skin around that may be used (2), neither (0); their heights
+    cv::Mat cls(win.size(), CV_8U, cv::Scalar(0)), hw(win.size(), CV_32F, cv::Scalar(kNaN));
+    for (int y = 0; y < win.height; ++y)
+      for (int x = 0; x < win.width; ++x) {
+        const int gy = y + win.y, gx = x + win.x;
+        const cv::Point pb(gx - box.x, gy - box.y);
+        const bool in = box.contains(cv::Point(gx, gy)) && fp.at<uchar>(pb) != 0;
+        const int l = lab_.at<int>(gy, gx);
+        const bool use = reach_.at<uchar>(gy, gx) && final_labels_.at<int>(gy, gx) == 0 && (l == 0 || l == k);
+        cls.at<uchar>(y, x) = in ? 1 : use ? 2 : 0;
+        hw.at<float>(y, x) = res_.height_map.at<float>(gy, gx);
+      }
+    // the affine map from the window's pixels to the tangent plane (m), at the box centre
+    const Eigen::Matrix2d J = pixelOnPlane(box, local, std::max(1, static_cast<int>(dmax / 4)));
+    const Eigen::JacobiSVD<Eigen::Matrix2d> svd(J);
+    const double g_min = svd.singularValues()(1), g_max = svd.singularValues()(0);
+    if (!J.allFinite() || !(g_min > 0)) return out;
+    // the grid: the finest pixel's size; the window's corners give its extent
+    const Eigen::Matrix2d M = J / g_min;
+    Eigen::Vector2d lo(1e30, 1e30), hi(-1e30, -1e30);
+    for (const Eigen::Vector2d& c : {Eigen::Vector2d(0, 0), Eigen::Vector2d(win.width, 0), Eigen::Vector2d(0, win.height),
+                                    Eigen::Vector2d(win.width, win.height)}) {
+      lo = lo.cwiseMin(M * c);
+      hi = hi.cwiseMax(M * c);
+    }
+    const cv::Size gs(static_cast<int>(std::ceil(hi.x() - lo.x())) + 1, static_cast<int>(std::ceil(hi.y() - lo.y())) + 1);
+    if (gs.area() > 16 * win.area() + 1000000) return out;
+    const cv::Matx23d A(M(0, 0), M(0, 1), -lo.x(), M(1, 0), M(1, 1), -lo.y());
+    cv::Mat cls_g, h_g;
+    cv::warpAffine(cls, cls_g, A, gs, cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(0));
+    cv::warpAffine(hw, h_g, A, gs, cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(kNaN));
+    const cv::Mat inside = cls_g == 1;
+    cv::Mat dout;
+    cv::distanceTransform(inside, din, cv::DIST_L2, cv::DIST_MASK_5);
+    cv::distanceTransform(~inside, dout, cv::DIST_L2, cv::DIST_MASK_5);
+    cv::minMaxLoc(din, nullptr, &dmax);
+    if (dmax < 3) return out;
+    const double w = std::max(1.0, dmax / 32);  // grid px per bin
+    const int n_out = static_cast<int>(std::ceil(dmax / w)), n_in = n_out;
+    std::vector<std::vector<float>> bins(n_out + n_in);  // bin i: distance (i - n_out) w ... (i - n_out + 1) w
+    for (int y = 0; y < gs.height; ++y)
+      for (int x = 0; x < gs.width; ++x) {
+        const uchar c = cls_g.at<uchar>(y, x);
+        const float h = h_g.at<float>(y, x);
+        if (c == 0 || !std::isfinite(h)) continue;
+        const double d = c == 1 ? din.at<float>(y, x) - 0.5 : 0.5 - dout.at<float>(y, x);
+        const int i = static_cast<int>(std::floor(d / w)) + n_out;
+        if (i >= 0 && i < n_out + n_in) bins[i].push_back(h);
+      }
+    const double pixel_m = g_min;
+    // the noise of a bin's median: a grid pixel is (g_min^2 / det J) of an image pixel
+    const double grid_per_image = std::fabs(J.determinant()) / (g_min * g_min);
+    // bin medians and their standard errors (the noise's correlation counted, as for the top)
+    const double density = noise_.sigma * noise_.sigma * noise_.correlation_area * grid_per_image;
+    std::vector<double> med(bins.size(), kNaN), err(bins.size(), kNaN);
+    for (std::size_t i = 0; i < bins.size(); ++i) {
+      auto& b = bins[i];
+      if (b.size() < 10) continue;
+      std::nth_element(b.begin(), b.begin() + b.size() / 2, b.end());
+      med[i] = b[b.size() / 2];
+      err[i] = std::sqrt(0.5 * M_PI * density / b.size());
+    }
+    std::vector<double> run(bins.size(), kNaN), run_err(bins.size(), kNaN);  // 3-bin running means
+    for (std::size_t i = 0; i < bins.size(); ++i) {
+      double sm = 0, se = 0;
+      int c = 0;
+      for (std::size_t j = i > 0 ? i - 1 : 0; j <= std::min(bins.size() - 1, i + 1); ++j)
+        if (std::isfinite(med[j])) {
+          sm += med[j];
+          se += err[j] * err[j];
+          ++c;
+        }
+      if (c >= 2) {
+        run[i] = sm / c;
+        run_err[i] = std::sqrt(se) / c;
+      }
+    }
+    std::vector<double> skin;
+    for (int i = 0; i < n_out / 2; ++i)
+      if (std::isfinite(med[i])) skin.push_back(med[i]);
+    if (skin.size() < 2) return out;
+    std::nth_element(skin.begin(), skin.begin() + skin.size() / 2, skin.end());
+    const double base = skin[skin.size() / 2];
+    int top_i = -1;
+    for (int i = n_out; i < n_out + n_in; ++i)
+      if (std::isfinite(run[i]) && (top_i < 0 || run[i] > run[top_i])) top_i = i;
+    if (top_i < 0) return out;
+    out.rise = run[top_i] - base;
+    std::vector<double> errs;
+    for (double e : run_err)
+      if (std::isfinite(e)) errs.push_back(e);
+    if (errs.empty()) return out;
+    std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
+    out.clear = out.rise > kBorderClear * errs[errs.size() / 2] && std::isfinite(noise_.sigma);
+    // the crossings, scanning inward (interpolated between bin centres)
+    auto crossing = [&](double f) -> double {
+      const double level = base + f * out.rise;
+      double prev_d = kNaN, prev_v = kNaN;
+      for (int i = 0; i <= top_i; ++i) {
+        if (!std::isfinite(run[i])) continue;
+        const double d = (i - n_out + 0.5) * w;
+        if (run[i] >= level)
+          return std::isfinite(prev_v) ? prev_d + (d - prev_d) * (level - prev_v) / (run[i] - prev_v) : d;
+        prev_d = d;
+        prev_v = run[i];
+      }
+      return kNaN;
+    };
+    const double d20 = crossing(0.2), d50 = crossing(0.5);
+    // how far out the region's skirt stands above the detection threshold (all the profile's outside if it does)
+    const double d_thr = out.rise > threshold_ ? crossing(threshold_ / out.rise) : 0.0;
+    out.reach = (std::isfinite(d_thr) ? std::max(0.0, -d_thr) : dmax) * pixel_m;
+    out.width = (d50 - d20) * pixel_m;
+    const double blur_px = std::sqrt(std::max(1.0, noise_.correlation_area) / (4 * M_PI));
+    // (and the profile's own resolution: 3-bin means over bins of w px, a box of 3 w + 1 px, spans 0.3 of it)
+    const double resolution = 0.3 * (3 * w + 1) * pixel_m;
+    out.limit = kMaxBorderFactor * std::sqrt(std::pow(0.21 * 2 * kHalfRamp, 2) + std::pow(0.84 * blur_px * g_max, 2) +
+                                             resolution * resolution);
+    // inward of the first crest: the lowest level before the deepest bins
+    double low = run[top_i];
+    for (int i = top_i + 1; i < n_out + n_in; ++i)
+      if (std::isfinite(run[i])) low = std::min(low, run[i]);
+    // (a significant fall only: the deepest bins hold the fewest heights)
+    double low_err = 0;
+    for (int i = top_i + 1; i < n_out + n_in; ++i)
+      if (std::isfinite(run[i]) && run[i] == low) low_err = run_err[i];
+    const bool significant = run[top_i] - low > 3 * std::hypot(low_err, run_err[top_i]);
+    out.dip = out.rise > 0 && significant ? (run[top_i] - low) / out.rise : 0;
+    return out;
+  }
+
   /** A region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an island of
    *  mismatches): its height above the reference means nothing (listed in at_edge_); one higher than max_height
    *  is not skin (a warning). True when the region is ignored for either reason. */
@@ -482,8 +751,10 @@ class PlaqueSearch {
   }
 
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
-  void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t, bool limited, const std::vector<int>& replace) {
+  void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t, bool limited, const std::vector<int>& replace,
+                 double border_width) {
     Plaque p;
+    p.border_width = border_width;
     const double nk = static_cast<double>(t.hk.size());
     p.area = t.area;
     p.centroid = t.c / std::max(1, t.nc);
@@ -601,6 +872,14 @@ class PlaqueSearch {
                               (scattered_.size() == 1 ? " was" : "s were") + " ignored: scattered pieces fill under " +
                               num(std::round(100 * kMinEllipseFill)) + " % of the ellipse of their moments (a plaque is one "
                               "patch of skin); the largest: " + largest(scattered_));
+    if (!relief_.empty())
+      res_.warnings.push_back(std::to_string(relief_.size()) + " raised region" + (relief_.size() == 1 ? " is" : "s are") +
+                              " not plaque-like: a plaque is sharply demarcated with one top, these rise smoothly (the "
+                              "lower part of their rise, 20 to 50 %, spans more than a plaque's border ramp blurred by the matcher) "
+                              "or have two tops: healthy relief (a fold, a ridge, a nose?) the reference does not follow, "
+                              "not measured as plaques (hatched in the height map; a plaque on such relief cannot be told "
+                              "from it: measure it from a view where the skin around it is smooth); the largest: " +
+                              largest(relief_));
     if (!sparse_.empty()) {
       const std::string list = largest(sparse_);
       res_.warnings.push_back(std::to_string(sparse_.size()) + " raised region" + (sparse_.size() == 1 ? " was" : "s were") +
@@ -620,6 +899,9 @@ class PlaqueSearch {
   bool first_scale_ = true;  // the regions ignored are reported from the first scale only (once)
   IndurationResult& res_;
   cv::Mat join_, off_band_, lab_, stats_, final_labels_;
+  cv::Mat relief_mask_;  // CV_8U: raised regions found to be relief, not plaques, with their skirts
+  int relief_found_ = 0;  // relief found in the pass over the cores being drawn
+  cv::Mat relief_cores_;  // CV_8U: the cores in which that relief was found
   int n_ = 0;
   std::vector<Plaque> plaques_;
   std::vector<std::vector<std::string>> plaque_warnings_;  // per plaque: partly measured, open outline
@@ -628,6 +910,7 @@ class PlaqueSearch {
   std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
   std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
   std::vector<std::pair<double, std::string>> scattered_;  // ignored regions of scattered pieces: area, description
+  std::vector<std::pair<double, std::string>> relief_;    // raised regions shaped like relief: area, description
   std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
 };
 

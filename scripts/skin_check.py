@@ -10,7 +10,9 @@ Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence b
 and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
 top height with its stated standard uncertainty, its error and the error over that uncertainty, the measured mean over the interior and over the footprint (volume / area), PASI class
 (measured/true), area and measured share; then a summary line over the plaques of
-at least 0.1 mm in the working band (the ones the instrument must measure).
+at least 0.1 mm in the working band (the ones the instrument must measure). A plaque not found whose centre lies
+where the measurement says the reference does not follow the skin (reference_unfollowed.png: relief, a fold) is
+"not found, marked"; the summary counts them.
 """
 import os
 import sys
@@ -18,6 +20,33 @@ import sys
 import cv2
 import numpy as np
 import yaml
+
+
+def marked_pixel(bag_path, out):
+    """A test of whether a point (left camera frame, m) projects into reference_unfollowed.png (the bag's left
+    CameraInfo: R and P, the rectified camera the measurement used; 10 px around); always False without rosbag, a
+    camera_info or the image."""
+    unf = cv2.imread(out + "/reference_unfollowed.png", cv2.IMREAD_GRAYSCALE)
+    if unf is None:
+        return lambda c: False
+    try:
+        import rosbag
+        with rosbag.Bag(bag_path) as bag:
+            ci = next((m for t, m, _ in bag.read_messages() if m._type == "sensor_msgs/CameraInfo" and "left" in t), None)
+    except Exception:  # no ROS python, or not a bag: no marks
+        return lambda c: False
+    if ci is None or not ci.width:
+        return lambda c: False
+    R, P = np.array(ci.R).reshape(3, 3), np.array(ci.P).reshape(3, 4)
+    sx, sy = unf.shape[1] / ci.width, unf.shape[0] / ci.height
+
+    def test(c):
+        x = P @ np.append(R @ c, 1.0)
+        if x[2] <= 0:
+            return False
+        u, v = int(round(x[0] / x[2] * sx)), int(round(x[1] / x[2] * sy))
+        return bool((unf[max(0, v - 10):v + 11, max(0, u - 10):u + 11] > 0).any())
+    return test
 
 
 def main(argv=None):
@@ -54,7 +83,8 @@ def main(argv=None):
           "| error / sigma | measured mean: interior, footprint (mm) | PASI | area (mm², true) | share |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     right = np.array(truth["rig_true"]["right_centre_in_left_m"])
-    required = found = pasi_ok = 0
+    marked_at = marked_pixel(argv[0], out)
+    required = found = pasi_ok = marked = 0
     worst = worst_z = 0.0
     for p in truth.get("plaques") or []:
         c = np.array(p["centroid_left_m"])
@@ -66,8 +96,11 @@ def main(argv=None):
         inc = "%.0f/%.0f%s" % (inc_l, inc_r, "" if max(inc_l, inc_r) <= 60 else " (outside)")
         best = min(measured, key=lambda q: np.linalg.norm(np.array(q["centroid_m"]) - c), default=None)
         if best is None or np.linalg.norm(np.array(best["centroid_m"]) - c) > 3e-3:
-            print("| %.3f | %.3f | %.0f | %s | not found | | | | %d | (%.0f) | |" % (
-                p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, p["pasi_class"], p["area_mm2"]))
+            is_marked = marked_at(c)
+            marked += req and is_marked
+            print("| %.3f | %.3f | %.0f | %s | not found%s | | | | %d | (%.0f) | |" % (
+                p["height_mm"], p["mean_height_mm"], p["angle_around_limb_deg"], inc, ", marked" if is_marked else "",
+                p["pasi_class"], p["area_mm2"]))
             continue
         top = best.get("top_height_mm", best["mean_height_mm"])  # results before the top height: the mean
         err = top - p["height_mm"]
@@ -124,8 +157,9 @@ def main(argv=None):
             "yes" if ref.get("follows_skin", True) else "no", 100 * ref.get("unfollowed_share", 0.0),
             "reference_unfollowed.png: %d px" % (unf > 0).sum() if unf is not None else "no reference_unfollowed.png"))
     print("plaques >= 0.1 mm in the working band: %d, found %d, worst error %.4f mm, worst error / sigma %.1f, "
-          "PASI right %d, extra %d%s"
-          % (required, found, worst, worst_z, pasi_ok, len(extra), " (%d on a ridge)" % on_ridge if ridges else ""))
+          "PASI right %d, extra %d%s%s"
+          % (required, found, worst, worst_z, pasi_ok, len(extra), " (%d on a ridge)" % on_ridge if ridges else "",
+             ", not found but marked %d" % marked if marked else ""))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@
 // config's image panels must show images (rviz docks them on the left, with the Displays panel), most of that
 // dock must change ("No Image" -> the image). Between two empty windows the dock differs too: rviz stacks the
 // image panels in a random order. rviz/rig.rviz runs through launch/rig.launch on 10 rendered globe frames in
-// place of the cameras. Every case prints the figures (whole screen, left dock, 3D view).
+// place of the cameras, rviz/site.rviz through launch/replay_sweep.launch on the reduced sweep. Every case prints
+// the figures (whole screen, left dock, 3D view).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -95,6 +96,10 @@ TEST(RvizScreenshots, EachConfigShowsItsScene) {
        50, true},
       // 10 frames over 20 s (after rosbag's 2 s delay): rviz is up long before the last image
       {"rig", "rig.rviz", "rig.launch bag:=" + data + "/globe_images_10.bag rate:=0.05", 30, true},
+      // the reduced sweep (5 half-resolution pairs): the site so far and its coverage image, both latched, appear
+      // once the first pair is fused (some seconds per pair); the launch runs on until the screenshot
+      {"site", "site.rviz", "replay_sweep.launch bag:=" + data + "/skin_sweep_half.bag results:= required_player:=false",
+       45, true},
   };
   ASSERT_TRUE(kBuildDirSet);
   std::printf("build tree: %s\n", std::getenv("SKIN3D_BUILD_DIR"));

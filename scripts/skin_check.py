@@ -6,7 +6,8 @@ plaque's nearest measured plaque (within 3 mm of its centroid) in the last frame
 Usage: skin_check.py DATASET.bag RESULTS_DIR
   DATASET.bag  made by `make_dataset skin` (reads DATASET.truth.yaml and DATASET.visible.png beside it)
   RESULTS_DIR  of `process_bag --induration` on it (reads induration.yaml and the last frame's disparity.tiff)
-Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence by both cameras: the working band)
+Prints the coverage (all co-visible skin, and skin seen at <= 60 deg incidence by both cameras: the working band),
+the matched disparities against the true ones (DATASET.disparity.tiff, when the dataset has it) by incidence,
 and per plaque: true top and mean height, angle around the limb, incidence in the left / right camera, measured
 top height with its stated standard uncertainty, its error and the error over that uncertainty, the measured mean over the interior and over the footprint (volume / area), PASI class
 (measured/true), area and measured share; then a summary line over the plaques of
@@ -70,6 +71,22 @@ def main(argv=None):
     m60 = m & (vis <= 61)
     print("visible skin with a disparity: %.1f %% (seen at <= 60 deg: %.1f %%); known pixels outside it: %d"
           % (100.0 * (k & m).sum() / max(1, m.sum()), 100.0 * (k & m60).sum() / max(1, m60.sum()), (k & ~m).sum()))
+    true_disp = cv2.imread(stem + ".disparity.tiff", cv2.IMREAD_UNCHANGED) if os.path.exists(stem + ".disparity.tiff") else None
+    if true_disp is not None and true_disp.shape == disp.shape:
+        sig = cv2.imread(out + "/disparity_sigma.tiff", cv2.IMREAD_UNCHANGED) if os.path.exists(
+            out + "/disparity_sigma.tiff") else None
+        parts = []
+        for lo, hi in ((0, 30), (30, 45), (45, 60), (60, 90)):
+            sel = k & np.isfinite(true_disp) & (vis > lo + (lo > 0)) & (vis <= hi + 1)
+            if sel.sum() < 100:
+                continue
+            e = disp[sel] - true_disp[sel]
+            z = e / sig[sel] if sig is not None and sig.shape == disp.shape else None
+            parts.append("%d-%d deg: median %+.3f px, robust sigma %.3f px, > 1 px %.1f %%%s" % (
+                lo, hi, np.median(e), 1.4826 * np.median(np.abs(e - np.median(e))), 100.0 * (np.abs(e) > 1).mean(),
+                ", error / stated sigma: robust sigma %.2f" % (1.4826 * np.median(np.abs(z - np.median(z))))
+                if z is not None else ""))
+        print("disparity against the truth (matched visible skin, by incidence): " + "; ".join(parts))
     truth = yaml.safe_load(open(stem + ".truth.yaml"))
     frames = (yaml.safe_load(open(out + "/induration.yaml")) or {}).get("frames") or []
     if not frames:

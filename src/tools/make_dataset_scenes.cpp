@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -158,19 +159,23 @@ namespace {
 
 /** Where the rectified left image sees skin that the right camera sees too: 0 = not, else 1 + the larger of the
  *  two views' incidence angles in degrees (1 ... 91). Rectified pixel -> raw pixel through the calibration in
- *  the bag (what the pipeline's rectification does) -> the true camera's ray. */
+ *  the bag (what the pipeline's rectification does) -> the true camera's ray. `disparity` (CV_32F): the true
+ *  disparity there (rectified left column minus the rectified right column where the right camera sees the same
+ *  skin point: what a perfect matcher finds on the pipeline's rectified pair), NaN elsewhere. */
 cv::Mat skinVisibility(const sim::SkinScene& scene, const geometry::StereoRig& true_rig, const stereo::RectifiedPair& info,
-                       const geometry::StereoRig& calib_rig, const Eigen::Isometry3d& T_W_L) {
+                       const geometry::StereoRig& calib_rig, const Eigen::Isometry3d& T_W_L, cv::Mat* disparity) {
   const geometry::CameraInfo& li = info.left;
   const geometry::CameraInfo& ri = info.right;
   const Eigen::Isometry3d T_L_R = poseLeftRight(true_rig);
   const Eigen::Isometry3d T_W_R = T_W_L * T_L_R, T_R_W = T_W_R.inverse();
   cv::Mat out(li.height, li.width, CV_8U, cv::Scalar(0));
+  *disparity = cv::Mat(li.height, li.width, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
   const double fx = li.P(0, 0), fy = li.P(1, 1), cx = li.P(0, 2), cy = li.P(1, 2);
   cv::parallel_for_(cv::Range(0, li.height), [&](const cv::Range& rows) {
     sim::Hit hit, back;
     for (int v = rows.start; v < rows.end; ++v) {
       uchar* o = out.ptr<uchar>(v);
+      float* dsp = disparity->ptr<float>(v);
       for (int u = 0; u < li.width; ++u) {
         const Eigen::Vector3d ray_cal = li.R.transpose() * Eigen::Vector3d((u - cx) / fx, (v - cy) / fy, 1.0);
         if (ray_cal.z() <= 0) continue;
@@ -193,6 +198,7 @@ cv::Mat skinVisibility(const sim::SkinScene& scene, const geometry::StereoRig& t
         if (cl <= 0 || cr <= 0) continue;
         const double inc = std::acos(std::min(cl, cr)) * 180.0 / M_PI;
         o[u] = static_cast<uchar>(1 + std::lround(std::min(90.0, inc)));
+        dsp[u] = static_cast<float>(u - ur);
       }
     }
   });
@@ -322,12 +328,20 @@ int makeSkin(const sim::DatasetConfig& c, int frames, rosbag::Bag& bag, YAML::Em
   ro.light_dir = (R * Eigen::Vector3d(0.15, -0.25, 1.0)).normalized();  // a light beside the rig
   ro.ambient = 0.25;
   writeRenderedExposures(scene, c, rc, true_rig, info, T_W_L, ro, frames, k.fps, bag, quiet);
-  const cv::Mat visible = skinVisibility(scene, true_rig, info, calib.rig, T_W_L);
+  cv::Mat true_disparity;
+  const cv::Mat visible = skinVisibility(scene, true_rig, info, calib.rig, T_W_L, &true_disparity);
   if (!cv::imwrite(visible_path, visible)) throw std::runtime_error("cannot write " + visible_path);
+  const std::string disparity_path = visible_path.substr(0, visible_path.size() - std::string(".visible.png").size()) +
+                                     ".disparity.tiff";
+  if (!cv::imwrite(disparity_path, true_disparity)) throw std::runtime_error("cannot write " + disparity_path);
   truth << YAML::Key << "visible_skin" << YAML::Value << YAML::BeginMap;
   truth << YAML::Key << "image" << YAML::Value << visible_path.substr(visible_path.find_last_of('/') + 1);
   truth << YAML::Key << "meaning" << YAML::Value
         << "rectified left image: 0 = no skin seen by both cameras, else 1 + the larger incidence angle (deg)";
+  truth << YAML::Key << "disparity" << YAML::Value << disparity_path.substr(disparity_path.find_last_of('/') + 1);
+  truth << YAML::Key << "disparity_meaning" << YAML::Value
+        << "rectified left image, float px: the true disparity (left column - right column) where both cameras see "
+           "the skin, NaN elsewhere";
   truth << YAML::Key << "pixels" << YAML::Value << cv::countNonZero(visible);
   truth << YAML::EndMap;
   emitSkinTruth(truth, scene, T_L_W);

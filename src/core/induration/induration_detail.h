@@ -3,6 +3,7 @@
 //   induration_maps.cpp       height map, smoothing, detection threshold, incidence, footprints, regions;
 //   induration_reference.cpp  reference surface fits (plane, quadratic, quadric) and their alternation;
 //   induration_plaques.cpp    the plaque search;
+//   induration_relief.cpp     the shape of a raised region's border: a plaque's or healthy relief's;
 //   induration.cpp            options, PASI class, measureInduration.
 #pragma once
 
@@ -118,6 +119,64 @@ double aspectOf(const Eigen::Vector3d& sum, const Eigen::Matrix3d& sq, int point
  *  `xyz` at most kMaxPlaqueAspect : 1), or stands more than `max_height` above its ring (not skin). */
 cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::Mat& xyz, const cv::Mat& known,
                           double smoothing, double threshold, double max_height);
+
+/** Pixels of `m` over the area of the ellipse of its second moments (4 pi sqrt of their eigenvalues' product: a
+ *  filled ellipse's own area); 0 for fewer than 3 pixels or a degenerate (straight) set. */
+double ellipseFill(const cv::Mat& m);
+/** The 8-connected regions of `mask` of at least `pixels` pixels. */
+cv::Mat largeEnough(const cv::Mat& mask, double pixels);
+/** Robust per-pixel sigma of the heights `h` (m) of a plaque's interior (footprint `fp`, the same size, eroded by
+ *  `margin` px) about their own shape (a least-squares quadratic in the pixel coordinates: a flat or domed top,
+ *  tilted; its 6 parameters take a negligible share of the noise); NaN under 100 heights. */
+double interiorNoise(const cv::Mat& h, const cv::Mat& fp, int margin);
+
+// ---- induration_relief.cpp
+/** m: half of a plaque's border ramp at its widest. Psoriatic plaques are sharply demarcated: the skin rises to the
+ *  plateau within about 2 mm (the skin generator draws 0.5-1.5 mm), and the half-height outline lies mid-ramp. */
+constexpr double kHalfRamp = 1.0e-3;
+/** A psoriatic plaque is plateau-like and sharply demarcated: across its border the skin rises to the plateau
+ *  within about 2 mm (kHalfRamp), a step, blurred by the matcher. The lower part of the step, from 20 to 50 % of the
+ *  rise from the skin around to the top, lies on that step as long as the plateau's edge stands at least half the
+ *  top (flat tops, and domes up to half the height), and spans 0.21 of the ramp (a smooth step) widened by the blur:
+ *  20-50 % of a step blurred by a Gaussian of sigma s spans 0.84 s, and s follows from the height noise's
+ *  correlation area (4 pi s^2). Healthy relief (a fold, a ridge, a nose, a tendon) rises smoothly from a long foot:
+ *  a Gaussian cross-section of sigma w spans 0.62 w there, 1.2-2.5 mm for the 2-4 mm of a nose's side or a fold.
+ *  A raised region whose 20-50 % rise spans more than this factor times a plaque's widest is relief, not a plaque.
+ *  The factor leaves room for what the model leaves out: a matcher's window straddling a step widens it more than
+ *  its noise's correlation says, and an outline that is not round mixes distances; on the rendered limb's plaques
+ *  (two full-resolution sweeps, about 100 profiles) the span reached 1.4 times the model, relief 1.9-3.7 times it. */
+constexpr double kMaxBorderFactor = 1.75;
+/** A raised region that falls inward by more than this share of its rise after its highest level has two tops
+ *  (the two sides of a fold, two ridges): a plaque's top is one plateau, flat or domed. */
+constexpr double kMaxInwardDip = 0.5;
+/** The border's shape is judged only where the rise stands this many standard errors of the profile above the
+ *  profile's noise: a low plaque on a noisy rig keeps the benefit of the doubt. */
+constexpr double kBorderClear = 10.0;
+
+/** The shape of a raised region's border (PlaqueSearch::borderShape). */
+struct BorderShape {
+  double width = std::numeric_limits<double>::quiet_NaN();  //!< m on the skin: 20 -> 50 % of the rise
+  double limit = std::numeric_limits<double>::quiet_NaN();  //!< m: the widest a plaque's border may be
+  double dip = 0;      //!< share of the rise lost inward of the highest level
+  double rise = 0;     //!< m: top level over the skin around
+  double reach = 0;    //!< m: from the outline out to where the rise falls under the detection threshold
+  bool clear = false;  //!< the rise stands kBorderClear profile errors above the noise
+  bool relief() const { return clear && (width > limit || dip > kMaxInwardDip); }
+};
+/** The image's pixels on the tangent plane `local` at the centre of `box` (m per px, in an orthonormal basis of the
+ *  plane: the rays of `ray` through the centre and through points `step` px beside it, met with the plane). */
+Eigen::Matrix2d pixelOnPlane(const cv::Mat& ray, const cv::Rect& box, const ReferenceSurface& local, int step);
+/** The shape of a raised region's border. `cls` (CV_8U): a window around the region, 1 inside it, 2 on the skin
+ *  around that may be used, 0 neither; `heights` (CV_32F, m, NaN unknown) there; `J`: the window's pixels on the
+ *  reference's tangent plane (pixelOnPlane). The window is resampled (nearest pixel) onto a square grid on that plane
+ *  (an oblique view's pixels are longer across the limb than along it), and the heights are binned by their signed
+ *  distance to the outline there, from as far outside as the region is deep (the foot of a bell lies outside a
+ *  half-height outline) to its deepest point. The levels are the median of the outer half of the outside bins (the
+ *  skin around) and the highest of the inside bins (3-bin running means); the crossings of 20 and 50 % of the rise
+ *  are the first, scanning inward. `noise`: the healthy skin's height noise (the bins' errors, the blur);
+ *  `threshold`: the detection threshold (m; the skirt's reach). */
+BorderShape borderShape(const cv::Mat& cls, const cv::Mat& heights, const Eigen::Matrix2d& J, const HeightNoise& noise,
+                        double threshold);
 
 // ---- induration_follow.cpp
 /** Above this share of the working band departing from the reference, the reference does not follow the skin. */

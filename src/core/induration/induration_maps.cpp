@@ -606,6 +606,59 @@ cv::Mat plaqueLikeRegions(const cv::Mat& regions, const cv::Mat& hs, const cv::M
   return out;
 }
 
+double ellipseFill(const cv::Mat& m) {
+  const cv::Moments mo = cv::moments(m, true);
+  if (mo.m00 < 3) return 0;
+  const double a = mo.mu20 / mo.m00, b = mo.mu02 / mo.m00, c = mo.mu11 / mo.m00;
+  const double det = a * b - c * c;
+  return det > 0 ? mo.m00 / (4 * M_PI * std::sqrt(det)) : 0;
+}
+
+cv::Mat largeEnough(const cv::Mat& mask, double pixels) {
+  cv::Mat lab, stats, cents;
+  const int n = cv::connectedComponentsWithStats(mask, lab, stats, cents, 8, CV_32S);
+  std::vector<uchar> keep(n, 0);
+  for (int k = 1; k < n; ++k) keep[k] = stats.at<int>(k, cv::CC_STAT_AREA) >= pixels ? 255 : 0;
+  cv::Mat out(mask.size(), CV_8U);
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x) out.at<uchar>(y, x) = keep[lab.at<int>(y, x)];
+  return out;
+}
+
+double interiorNoise(const cv::Mat& h_box, const cv::Mat& fp, int margin) {
+  cv::Mat interior = fp.clone();
+  if (margin > 0)
+    cv::erode(fp, interior,
+              cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * margin + 1, 2 * margin + 1)),
+              cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
+  std::vector<Eigen::Vector3d> pts;  // (x, y, h), x and y about the box centre in units of its half size
+  const double cx = 0.5 * fp.cols, cy = 0.5 * fp.rows, sc = std::max(1.0, 0.5 * std::max(fp.cols, fp.rows));
+  for (int y = 0; y < fp.rows; ++y)
+    for (int x = 0; x < fp.cols; ++x) {
+      const float h = h_box.at<float>(y, x);
+      if (interior.at<uchar>(y, x) && std::isfinite(h)) pts.emplace_back((x - cx) / sc, (y - cy) / sc, h);
+    }
+  if (pts.size() < 100) return kNaN;
+  auto basis = [](const Eigen::Vector3d& q) {
+    Eigen::Matrix<double, 6, 1> f;
+    f << 1, q.x(), q.y(), q.x() * q.x(), q.x() * q.y(), q.y() * q.y();
+    return f;
+  };
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+  for (const auto& q : pts) {
+    const Eigen::Matrix<double, 6, 1> f = basis(q);
+    A += f * f.transpose();
+    b += f * q.z();
+  }
+  const Eigen::Matrix<double, 6, 1> c = A.ldlt().solve(b);
+  if (!c.allFinite()) return kNaN;
+  std::vector<float> r;
+  r.reserve(pts.size());
+  for (const auto& q : pts) r.push_back(static_cast<float>(q.z() - basis(q).dot(c)));
+  return medianAndScale(r).second;
+}
+
 }  // namespace induration_detail
 }  // namespace induration
 }  // namespace skin3d

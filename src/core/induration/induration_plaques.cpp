@@ -25,9 +25,6 @@ namespace {
  *  measured: a warning says so. */
 constexpr double kOpenOutline = 0.1;
 
-/** m: half of a plaque's border ramp at its widest. Psoriatic plaques are sharply demarcated: the skin rises to the
- *  plateau within about 2 mm (the skin generator draws 0.5-1.5 mm), and the half-height outline lies mid-ramp. */
-constexpr double kHalfRamp = 1.0e-3;
 /** m: the healthy-skin ring around a plaque is at least this wide (its heights' median and scatter). */
 constexpr double kRingWidth = 1.0e-3;
 /** A plaque found only at the wider scale must have a height over this share of its footprint: its smoothed heights
@@ -36,36 +33,6 @@ constexpr double kRingWidth = 1.0e-3;
 constexpr double kWideMeasuredShare = 0.8;
 /** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
 constexpr double kMinEllipseFill = 0.5;
-
-/** A psoriatic plaque is plateau-like and sharply demarcated: across its border the skin rises to the plateau
- *  within about 2 mm (kHalfRamp), a step, blurred by the matcher. The lower part of the step, from 20 to 50 % of the
- *  rise from the skin around to the top, lies on that step as long as the plateau's edge stands at least half the
- *  top (flat tops, and domes up to half the height), and spans 0.21 of the ramp (a smooth step) widened by the blur:
- *  20-50 % of a step blurred by a Gaussian of sigma s spans 0.84 s, and s follows from the height noise's
- *  correlation area (4 pi s^2). Healthy relief (a fold, a ridge, a nose, a tendon) rises smoothly from a long foot:
- *  a Gaussian cross-section of sigma w spans 0.62 w there, 1.2-2.5 mm for the 2-4 mm of a nose's side or a fold.
- *  A raised region whose 20-50 % rise spans more than this factor times a plaque's widest is relief, not a plaque.
- *  The factor leaves room for what the model leaves out: a matcher's window straddling a step widens it more than
- *  its noise's correlation says, and an outline that is not round mixes distances; on the rendered limb's plaques
- *  (two full-resolution sweeps, about 100 profiles) the span reached 1.4 times the model, relief 1.9-3.7 times it. */
-constexpr double kMaxBorderFactor = 1.75;
-/** A raised region that falls inward by more than this share of its rise after its highest level has two tops
- *  (the two sides of a fold, two ridges): a plaque's top is one plateau, flat or domed. */
-constexpr double kMaxInwardDip = 0.5;
-/** The border's shape is judged only where the rise stands this many standard errors of the profile above the
- *  profile's noise: a low plaque on a noisy rig keeps the benefit of the doubt. */
-constexpr double kBorderClear = 10.0;
-
-/** The shape of a raised region's border (PlaqueSearch::borderShape). */
-struct BorderShape {
-  double width = std::numeric_limits<double>::quiet_NaN();  //!< m on the skin: 20 -> 50 % of the rise
-  double limit = std::numeric_limits<double>::quiet_NaN();  //!< m: the widest a plaque's border may be
-  double dip = 0;      //!< share of the rise lost inward of the highest level
-  double rise = 0;     //!< m: top level over the skin around
-  double reach = 0;    //!< m: from the outline out to where the rise falls under the detection threshold
-  bool clear = false;  //!< the rise stands kBorderClear profile errors above the noise
-  bool relief() const { return clear && (width > limit || dip > kMaxInwardDip); }
-};
 
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
@@ -223,7 +190,7 @@ class PlaqueSearch {
       return;
     }
     // a plaque is sharply demarcated and has one top; a smooth, bell-like rise or two tops is relief (kMaxBorderFactor)
-    const BorderShape border = borderShape(k, box, foot.pixels, local);
+    const BorderShape border = regionBorder(k, box, foot.pixels, local);
     if (border.relief()) {
       // the relief and its skirt above the threshold: no plaque can be measured there; the rest of the core (a
       // plaque beside the relief, joined to it by the skirt) is searched again (run)
@@ -246,28 +213,6 @@ class PlaqueSearch {
     addPlaque(box, foot, sums, limited, replace, border.width);
   }
 
-  /** Pixels of `m` over the area of the ellipse of its second moments (4 pi sqrt of their eigenvalues' product: a
-   *  filled ellipse's own area); 0 for fewer than 3 pixels or a degenerate (straight) set. */
-  static double ellipseFill(const cv::Mat& m) {
-    const cv::Moments mo = cv::moments(m, true);
-    if (mo.m00 < 3) return 0;
-    const double a = mo.mu20 / mo.m00, b = mo.mu02 / mo.m00, c = mo.mu11 / mo.m00;
-    const double det = a * b - c * c;
-    return det > 0 ? mo.m00 / (4 * M_PI * std::sqrt(det)) : 0;
-  }
-
-  /** The 8-connected regions of `mask` of at least `pixels` pixels. */
-  static cv::Mat largeEnough(const cv::Mat& mask, double pixels) {
-    cv::Mat lab, stats, cents;
-    const int n = cv::connectedComponentsWithStats(mask, lab, stats, cents, 8, CV_32S);
-    std::vector<uchar> keep(n, 0);
-    for (int k = 1; k < n; ++k) keep[k] = stats.at<int>(k, cv::CC_STAT_AREA) >= pixels ? 255 : 0;
-    cv::Mat out(mask.size(), CV_8U);
-    for (int y = 0; y < mask.rows; ++y)
-      for (int x = 0; x < mask.cols; ++x) out.at<uchar>(y, x) = keep[lab.at<int>(y, x)];
-    return out;
-  }
-
   /** Whether plaque label l (0: none) holds its pixels against the scale being searched: every plaque does at the
    *  first scale; at a later one, only those not drawn at their scale's threshold. */
   bool taken(int l) const { return l != 0 && (first_scale_ || !tentative_[l - 1]); }
@@ -286,7 +231,7 @@ class PlaqueSearch {
 
   /** Marks the footprint `fp` (in `box`) grown by `reach` (m on the tangent plane `local`; at most 300 px) as relief. */
   void markRelief(const cv::Rect& box, const cv::Mat& fp, double reach, const ReferenceSurface& local) {
-    const Eigen::Matrix2d J = pixelOnPlane(box, local, std::max(1, std::min(box.width, box.height) / 4));
+    const Eigen::Matrix2d J = pixelOnPlane(s_.cloud.ray, box, local, std::max(1, std::min(box.width, box.height) / 4));
     const double px_m = J.allFinite() ? Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1) : 0.0;
     const int r = px_m > 0 ? static_cast<int>(std::ceil(std::min(300.0, reach / px_m))) : 0;
     const cv::Rect win = cv::Rect(box.x - r, box.y - r, box.width + 2 * r, box.height + 2 * r) & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
@@ -294,25 +239,6 @@ class PlaqueSearch {
     fp.copyTo(m(box - win.tl()), fp);
     if (r > 0) cv::dilate(m, m, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
     relief_mask_(win).setTo(255, m & band_(win));
-  }
-
-  /** The image's pixels on the tangent plane `local` at the centre of `box` (m per px, in an orthonormal basis of the
-   *  plane: the rays through the centre and through points `step` px beside it, met with the plane). */
-  Eigen::Matrix2d pixelOnPlane(const cv::Rect& box, const ReferenceSurface& local, int step) const {
-    auto onPlane = [&](double u, double v) {
-      const int ui = std::clamp(static_cast<int>(std::lround(u)), 0, s_.xyz.cols - 1);
-      const int vi = std::clamp(static_cast<int>(std::lround(v)), 0, s_.xyz.rows - 1);
-      const cv::Vec3f& q = s_.cloud.ray.at<cv::Vec3f>(vi, ui);
-      const Eigen::Vector3d ray(q[0], q[1], q[2]);
-      return Eigen::Vector3d(-local.d / local.normal.dot(ray) * ray);
-    };
-    const double cu = box.x + 0.5 * box.width, cv0 = box.y + 0.5 * box.height;
-    const Eigen::Vector3d X0 = onPlane(cu, cv0), du = (onPlane(cu + step, cv0) - X0) / step,
-                          dv = (onPlane(cu, cv0 + step) - X0) / step;
-    const Eigen::Vector3d b1 = du.normalized(), b2 = local.normal.cross(b1).normalized();
-    Eigen::Matrix2d J;
-    J << b1.dot(du), b1.dot(dv), b2.dot(du), b2.dot(dv);
-    return J;
   }
 
   /** True when at least half of core k lies in relief found already. */
@@ -486,152 +412,30 @@ class PlaqueSearch {
     return t;
   }
 
-  /** The shape of the border of the region `fp` (in `box`) of core k, on the skin: the window around it is
-   *  resampled (nearest pixel) onto a square grid on the reference's tangent plane `local` at the region (an affine
-   *  map from the rays through the box centre and its neighbours: an oblique view's pixels are longer across the
-   *  limb than along it), and the heights (unsmoothed) are binned by their signed distance to the outline there,
-   *  from as far outside as the region is deep (the foot of a bell lies outside a half-height outline) to its
-   *  deepest point; outside, only the working band's skin on no plaque and no other core. The levels are the
-   *  median of the outer half of the outside bins (the skin around) and the highest of the inside bins (3-bin
-   *  running means); the crossings of 20 and 50 % of the rise are the first, scanning inward. */
-  BorderShape borderShape(int k, const cv::Rect& box, const cv::Mat& fp, const ReferenceSurface& local) const {
-    BorderShape out;
+  /** The shape of the border of the region `fp` (in `box`) of core k (borderShape): the window around it, as deep
+   *  outside as the region is inside, its pixels inside (1), on the skin around that may be used (2: the working
+   *  band's skin on no plaque and no other core) or neither (0), their heights, and the pixels' map onto the
+   *  reference's tangent plane `local` there. */
+  BorderShape regionBorder(int k, const cv::Rect& box, const cv::Mat& fp, const ReferenceSurface& local) const {
     cv::Mat din;
     cv::distanceTransform(fp, din, cv::DIST_L2, cv::DIST_MASK_5);
     double dmax = 0;
     cv::minMaxLoc(din, nullptr, &dmax);
-    if (dmax < 3) return out;
+    if (dmax < 3) return BorderShape();
     const int r = static_cast<int>(std::ceil(std::min(2 * dmax, 300.0))) + 2;
     const cv::Rect win = cv::Rect(box.x - r, box.y - r, box.width + 2 * r, box.height + 2 * r) & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
-    // the window's pixels: inside (1), skin around that may be used (2), neither (0); their heights
     cv::Mat cls(win.size(), CV_8U, cv::Scalar(0)), hw(win.size(), CV_32F, cv::Scalar(kNaN));
     for (int y = 0; y < win.height; ++y)
       for (int x = 0; x < win.width; ++x) {
         const int gy = y + win.y, gx = x + win.x;
-        const cv::Point pb(gx - box.x, gy - box.y);
-        const bool in = box.contains(cv::Point(gx, gy)) && fp.at<uchar>(pb) != 0;
+        const bool in = box.contains(cv::Point(gx, gy)) && fp.at<uchar>(gy - box.y, gx - box.x) != 0;
         const int l = lab_.at<int>(gy, gx);
         const bool use = reach_.at<uchar>(gy, gx) && final_labels_.at<int>(gy, gx) == 0 && (l == 0 || l == k);
         cls.at<uchar>(y, x) = in ? 1 : use ? 2 : 0;
         hw.at<float>(y, x) = res_.height_map.at<float>(gy, gx);
       }
-    // the affine map from the window's pixels to the tangent plane (m), at the box centre
-    const Eigen::Matrix2d J = pixelOnPlane(box, local, std::max(1, static_cast<int>(dmax / 4)));
-    const Eigen::JacobiSVD<Eigen::Matrix2d> svd(J);
-    const double g_min = svd.singularValues()(1), g_max = svd.singularValues()(0);
-    if (!J.allFinite() || !(g_min > 0)) return out;
-    // the grid: the finest pixel's size; the window's corners give its extent
-    const Eigen::Matrix2d M = J / g_min;
-    Eigen::Vector2d lo(1e30, 1e30), hi(-1e30, -1e30);
-    for (const Eigen::Vector2d& c : {Eigen::Vector2d(0, 0), Eigen::Vector2d(win.width, 0), Eigen::Vector2d(0, win.height),
-                                    Eigen::Vector2d(win.width, win.height)}) {
-      lo = lo.cwiseMin(M * c);
-      hi = hi.cwiseMax(M * c);
-    }
-    const cv::Size gs(static_cast<int>(std::ceil(hi.x() - lo.x())) + 1, static_cast<int>(std::ceil(hi.y() - lo.y())) + 1);
-    if (gs.area() > 16 * win.area() + 1000000) return out;
-    const cv::Matx23d A(M(0, 0), M(0, 1), -lo.x(), M(1, 0), M(1, 1), -lo.y());
-    cv::Mat cls_g, h_g;
-    cv::warpAffine(cls, cls_g, A, gs, cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(0));
-    cv::warpAffine(hw, h_g, A, gs, cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(kNaN));
-    const cv::Mat inside = cls_g == 1;
-    cv::Mat dout;
-    cv::distanceTransform(inside, din, cv::DIST_L2, cv::DIST_MASK_5);
-    cv::distanceTransform(~inside, dout, cv::DIST_L2, cv::DIST_MASK_5);
-    cv::minMaxLoc(din, nullptr, &dmax);
-    if (dmax < 3) return out;
-    const double w = std::max(1.0, dmax / 32);  // grid px per bin
-    const int n_out = static_cast<int>(std::ceil(dmax / w)), n_in = n_out;
-    std::vector<std::vector<float>> bins(n_out + n_in);  // bin i: distance (i - n_out) w ... (i - n_out + 1) w
-    for (int y = 0; y < gs.height; ++y)
-      for (int x = 0; x < gs.width; ++x) {
-        const uchar c = cls_g.at<uchar>(y, x);
-        const float h = h_g.at<float>(y, x);
-        if (c == 0 || !std::isfinite(h)) continue;
-        const double d = c == 1 ? din.at<float>(y, x) - 0.5 : 0.5 - dout.at<float>(y, x);
-        const int i = static_cast<int>(std::floor(d / w)) + n_out;
-        if (i >= 0 && i < n_out + n_in) bins[i].push_back(h);
-      }
-    const double pixel_m = g_min;
-    // the noise of a bin's median: a grid pixel is (g_min^2 / det J) of an image pixel
-    const double grid_per_image = std::fabs(J.determinant()) / (g_min * g_min);
-    // bin medians and their standard errors (the noise's correlation counted, as for the top)
-    const double density = noise_.sigma * noise_.sigma * noise_.correlation_area * grid_per_image;
-    std::vector<double> med(bins.size(), kNaN), err(bins.size(), kNaN);
-    for (std::size_t i = 0; i < bins.size(); ++i) {
-      auto& b = bins[i];
-      if (b.size() < 10) continue;
-      std::nth_element(b.begin(), b.begin() + b.size() / 2, b.end());
-      med[i] = b[b.size() / 2];
-      err[i] = std::sqrt(0.5 * M_PI * density / b.size());
-    }
-    std::vector<double> run(bins.size(), kNaN), run_err(bins.size(), kNaN);  // 3-bin running means
-    for (std::size_t i = 0; i < bins.size(); ++i) {
-      double sm = 0, se = 0;
-      int c = 0;
-      for (std::size_t j = i > 0 ? i - 1 : 0; j <= std::min(bins.size() - 1, i + 1); ++j)
-        if (std::isfinite(med[j])) {
-          sm += med[j];
-          se += err[j] * err[j];
-          ++c;
-        }
-      if (c >= 2) {
-        run[i] = sm / c;
-        run_err[i] = std::sqrt(se) / c;
-      }
-    }
-    std::vector<double> skin;
-    for (int i = 0; i < n_out / 2; ++i)
-      if (std::isfinite(med[i])) skin.push_back(med[i]);
-    if (skin.size() < 2) return out;
-    std::nth_element(skin.begin(), skin.begin() + skin.size() / 2, skin.end());
-    const double base = skin[skin.size() / 2];
-    int top_i = -1;
-    for (int i = n_out; i < n_out + n_in; ++i)
-      if (std::isfinite(run[i]) && (top_i < 0 || run[i] > run[top_i])) top_i = i;
-    if (top_i < 0) return out;
-    out.rise = run[top_i] - base;
-    std::vector<double> errs;
-    for (double e : run_err)
-      if (std::isfinite(e)) errs.push_back(e);
-    if (errs.empty()) return out;
-    std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
-    out.clear = out.rise > kBorderClear * errs[errs.size() / 2] && std::isfinite(noise_.sigma);
-    // the crossings, scanning inward (interpolated between bin centres)
-    auto crossing = [&](double f) -> double {
-      const double level = base + f * out.rise;
-      double prev_d = kNaN, prev_v = kNaN;
-      for (int i = 0; i <= top_i; ++i) {
-        if (!std::isfinite(run[i])) continue;
-        const double d = (i - n_out + 0.5) * w;
-        if (run[i] >= level)
-          return std::isfinite(prev_v) ? prev_d + (d - prev_d) * (level - prev_v) / (run[i] - prev_v) : d;
-        prev_d = d;
-        prev_v = run[i];
-      }
-      return kNaN;
-    };
-    const double d20 = crossing(0.2), d50 = crossing(0.5);
-    // how far out the region's skirt stands above the detection threshold (all the profile's outside if it does)
-    const double d_thr = out.rise > threshold_ ? crossing(threshold_ / out.rise) : 0.0;
-    out.reach = (std::isfinite(d_thr) ? std::max(0.0, -d_thr) : dmax) * pixel_m;
-    out.width = (d50 - d20) * pixel_m;
-    const double blur_px = std::sqrt(std::max(1.0, noise_.correlation_area) / (4 * M_PI));
-    // (and the profile's own resolution: 3-bin means over bins of w px, a box of 3 w + 1 px, spans 0.3 of it)
-    const double resolution = 0.3 * (3 * w + 1) * pixel_m;
-    out.limit = kMaxBorderFactor * std::sqrt(std::pow(0.21 * 2 * kHalfRamp, 2) + std::pow(0.84 * blur_px * g_max, 2) +
-                                             resolution * resolution);
-    // inward of the first crest: the lowest level before the deepest bins
-    double low = run[top_i];
-    for (int i = top_i + 1; i < n_out + n_in; ++i)
-      if (std::isfinite(run[i])) low = std::min(low, run[i]);
-    // (a significant fall only: the deepest bins hold the fewest heights)
-    double low_err = 0;
-    for (int i = top_i + 1; i < n_out + n_in; ++i)
-      if (std::isfinite(run[i]) && run[i] == low) low_err = run_err[i];
-    const bool significant = run[top_i] - low > 3 * std::hypot(low_err, run_err[top_i]);
-    out.dip = out.rise > 0 && significant ? (run[top_i] - low) / out.rise : 0;
-    return out;
+    const Eigen::Matrix2d J = pixelOnPlane(s_.cloud.ray, box, local, std::max(1, static_cast<int>(dmax / 4)));
+    return borderShape(cls, hw, J, noise_, threshold_);
   }
 
   /** A region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an island of
@@ -713,43 +517,6 @@ class PlaqueSearch {
     return out;
   }
 
-  /** Robust per-pixel sigma of the heights of a plaque's interior (footprint `fp` in `box`, eroded by
-   *  interior_margin_px) about their own shape (a least-squares quadratic in the pixel coordinates: a flat or
-   *  domed top, tilted; its 6 parameters take a negligible share of the noise); NaN under 100 heights. */
-  double interiorNoise(const cv::Rect& box, const cv::Mat& fp) const {
-    cv::Mat interior = fp.clone();
-    if (o_.interior_margin_px > 0)
-      cv::erode(fp, interior,
-                cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * o_.interior_margin_px + 1, 2 * o_.interior_margin_px + 1)),
-                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, 0);
-    std::vector<Eigen::Vector3d> pts;  // (x, y, h), x and y about the box centre in units of its half size
-    const double cx = 0.5 * box.width, cy = 0.5 * box.height, sc = std::max(1.0, 0.5 * std::max(box.width, box.height));
-    for (int y = 0; y < box.height; ++y)
-      for (int x = 0; x < box.width; ++x) {
-        const float h = res_.height_map.at<float>(y + box.y, x + box.x);
-        if (interior.at<uchar>(y, x) && std::isfinite(h)) pts.emplace_back((x - cx) / sc, (y - cy) / sc, h);
-      }
-    if (pts.size() < 100) return kNaN;
-    auto basis = [](const Eigen::Vector3d& q) {
-      Eigen::Matrix<double, 6, 1> f;
-      f << 1, q.x(), q.y(), q.x() * q.x(), q.x() * q.y(), q.y() * q.y();
-      return f;
-    };
-    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-    for (const auto& q : pts) {
-      const Eigen::Matrix<double, 6, 1> f = basis(q);
-      A += f * f.transpose();
-      b += f * q.z();
-    }
-    const Eigen::Matrix<double, 6, 1> c = A.ldlt().solve(b);
-    if (!c.allFinite()) return kNaN;
-    std::vector<float> r;
-    r.reserve(pts.size());
-    for (const auto& q : pts) r.push_back(static_cast<float>(q.z() - basis(q).dot(c)));
-    return medianAndScale(r).second;
-  }
-
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
   void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t, bool limited, const std::vector<int>& replace,
                  double border_width) {
@@ -775,7 +542,7 @@ class PlaqueSearch {
     const double pixel_m = std::sqrt(t.area / std::max(1, t.px));
     const Surround sur = surround(box, foot.pixels, pixel_m);
     p.surround_offset = sur.offset;
-    double sig = interiorNoise(box, foot.pixels);
+    double sig = interiorNoise(res_.height_map(box), foot.pixels, o_.interior_margin_px);
     if (!std::isfinite(sig)) sig = sur.pixels >= 100 ? sur.sigma : noise_.sigma;
     const double kHalfPi = 0.5 * 3.14159265358979323846;
     double top_sigma = kNaN;

@@ -160,6 +160,7 @@ struct BorderShape {
   double dip = 0;      //!< share of the rise lost inward of the highest level
   double rise = 0;     //!< m: top level over the skin around
   double reach = 0;    //!< m: from the outline out to where the rise falls under the detection threshold
+  double pixel = 0;    //!< m: the image's finest pixel on the skin there (along its shorter axis)
   bool clear = false;  //!< the rise stands kBorderClear profile errors above the noise
   bool relief() const { return clear && (width > limit || dip > kMaxInwardDip); }
 };

@@ -1,13 +1,10 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Induration measurement: the plaque search. See include/skin3d/induration/induration.h.
 #include <Eigen/Cholesky>
-#include <Eigen/LU>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
-#include <numeric>
 #include <opencv2/imgproc.hpp>
 
 #include "../common/text.h"
@@ -79,7 +76,7 @@ class PlaqueSearch {
       min_pixels_ = sc.min_pixels;
       if (i == 0) first_threshold_ = sc.threshold;
       first_scale_ = i == 0;
-      cv::Mat above = (hs_ > threshold_) & band_, cents;
+      cv::Mat above = (hs_ > threshold_) & band_;
       if (o_.interior_margin_px > 0) {
         cv::morphologyEx(above, above, cv::MORPH_CLOSE, join_);
         above.setTo(0, off_band_);
@@ -88,12 +85,7 @@ class PlaqueSearch {
       // (less the holes a drawn plaque may fill: half) cannot give one
       if (min_pixels_ > 0) above = largeEnough(above, 0.5 * min_pixels_);
       if (sc.plaque_like_only) above = plaqueLikeRegions(above, hs_, s_.xyz, s_.known_mask, smoothing_, threshold_, o_.max_height);
-      n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
-      std::vector<int> cores(std::max(0, n_ - 1));
-      std::iota(cores.begin(), cores.end(), 1);
-      std::stable_sort(cores.begin(), cores.end(),
-                       [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
-      for (const int k : cores) drawCore(k);
+      drawCores(above, cv::Mat());
       // relief found: the rest of its core (beyond the relief's skirt) is searched again, at most twice; the cores
       // the relief was not part of were drawn already
       for (int again = 0; again < 2 && relief_found_ > 0; ++again) {
@@ -101,17 +93,7 @@ class PlaqueSearch {
         above.setTo(0, relief_mask_);
         const cv::Mat was_relief = relief_cores_.clone();
         relief_cores_.setTo(0);
-        n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
-        std::vector<char> near(n_, 0);
-        for (int y = 0; y < lab_.rows; ++y)
-          for (int x = 0; x < lab_.cols; ++x)
-            if (was_relief.at<uchar>(y, x)) near[lab_.at<int>(y, x)] = 1;
-        std::vector<int> rest;
-        for (int k = 1; k < n_; ++k)
-          if (near[k]) rest.push_back(k);
-        std::stable_sort(rest.begin(), rest.end(),
-                         [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
-        for (const int k : rest) drawCore(k);
+        drawCores(above, was_relief);
       }
       relief_found_ = 0;
       relief_cores_.setTo(0);
@@ -122,12 +104,29 @@ class PlaqueSearch {
   }
 
  private:
+  /** Labels the cores of `above` and draws them, largest first (only those touching `only`, when given). */
+  void drawCores(const cv::Mat& above, const cv::Mat& only) {
+    cv::Mat cents;
+    n_ = cv::connectedComponentsWithStats(above, lab_, stats_, cents, 8, CV_32S);
+    std::vector<char> use(std::max(0, n_), only.empty() ? 1 : 0);
+    if (!only.empty())
+      for (int y = 0; y < lab_.rows; ++y)
+        for (int x = 0; x < lab_.cols; ++x)
+          if (only.at<uchar>(y, x)) use[lab_.at<int>(y, x)] = 1;
+    std::vector<int> cores;
+    for (int k = 1; k < n_; ++k)
+      if (use[k]) cores.push_back(k);
+    std::stable_sort(cores.begin(), cores.end(),
+                     [&](int a, int b) { return stats_.at<int>(a, cv::CC_STAT_AREA) > stats_.at<int>(b, cv::CC_STAT_AREA); });
+    for (const int k : cores) drawCore(k);
+  }
+
   /** Core k's plaque, if it is one. */
   void drawCore(int k) {
     const cv::Rect bb(stats_.at<int>(k, cv::CC_STAT_LEFT), stats_.at<int>(k, cv::CC_STAT_TOP),
                       stats_.at<int>(k, cv::CC_STAT_WIDTH), stats_.at<int>(k, cv::CC_STAT_HEIGHT));
     if (takenAlready(k, bb)) return;  // part of a plaque drawn already
-    if (inRelief(k, bb)) return;      // relief found already (at an earlier scale)
+    if (inRelief(k, bb)) return;      // relief found already
     double edge = 0, ceiling = 0;
     bool limited = false;
     if (!coreLevels(k, bb, &edge, &ceiling, &limited)) return;
@@ -198,7 +197,7 @@ class PlaqueSearch {
       int overlap = 0;
       for (int y = 0; y < box.height; ++y)
         for (int x = 0; x < box.width; ++x) overlap += foot.pixels.at<uchar>(y, x) && relief_mask_.at<uchar>(y + box.y, x + box.x);
-      markRelief(box, foot.pixels, border.reach, local);
+      markRelief(box, foot.pixels, border);
       relief_cores_(bb).setTo(255, lab_(bb) == k);
       ++relief_found_;
       if (4 * overlap > sums.px) return;
@@ -217,23 +216,33 @@ class PlaqueSearch {
    *  first scale; at a later one, only those not drawn at their scale's threshold. */
   bool taken(int l) const { return l != 0 && (first_scale_ || !tentative_[l - 1]); }
 
-  /** True when at least half of core k lies in a plaque drawn already. */
-  bool takenAlready(int k, const cv::Rect& bb) const {
-    int in_core = 0, taken = 0;
+  /** True when at least half of core k (box `bb`) lies where `in(y, x)` holds. */
+  template <typename In>
+  bool mostlyIn(int k, const cv::Rect& bb, In in) const {
+    int in_core = 0, inside = 0;
     for (int y = bb.y; y < bb.y + bb.height; ++y)
       for (int x = bb.x; x < bb.x + bb.width; ++x)
         if (lab_.at<int>(y, x) == k) {
           ++in_core;
-          taken += this->taken(final_labels_.at<int>(y, x));
+          inside += in(y, x);
         }
-    return 2 * taken >= in_core;
+    return 2 * inside >= in_core;
   }
 
-  /** Marks the footprint `fp` (in `box`) grown by `reach` (m on the tangent plane `local`; at most 300 px) as relief. */
-  void markRelief(const cv::Rect& box, const cv::Mat& fp, double reach, const ReferenceSurface& local) {
-    const Eigen::Matrix2d J = pixelOnPlane(s_.cloud.ray, box, local, std::max(1, std::min(box.width, box.height) / 4));
-    const double px_m = J.allFinite() ? Eigen::JacobiSVD<Eigen::Matrix2d>(J).singularValues()(1) : 0.0;
-    const int r = px_m > 0 ? static_cast<int>(std::ceil(std::min(300.0, reach / px_m))) : 0;
+  /** True when at least half of core k lies in a plaque drawn already. */
+  bool takenAlready(int k, const cv::Rect& bb) const {
+    return mostlyIn(k, bb, [&](int y, int x) { return taken(final_labels_.at<int>(y, x)); });
+  }
+
+  /** True when at least half of core k lies in relief found already (at an earlier scale or pass). */
+  bool inRelief(int k, const cv::Rect& bb) const {
+    return mostlyIn(k, bb, [&](int y, int x) { return relief_mask_.at<uchar>(y, x) != 0; });
+  }
+
+  /** Marks the footprint `fp` (in `box`) grown by the border's reach (in image px: over the finest pixel's size on
+   *  the skin, at most 300 px) as relief. */
+  void markRelief(const cv::Rect& box, const cv::Mat& fp, const BorderShape& border) {
+    const int r = border.pixel > 0 ? static_cast<int>(std::ceil(std::min(300.0, border.reach / border.pixel))) : 0;
     const cv::Rect win = cv::Rect(box.x - r, box.y - r, box.width + 2 * r, box.height + 2 * r) & cv::Rect(0, 0, s_.xyz.cols, s_.xyz.rows);
     cv::Mat m = cv::Mat::zeros(win.size(), CV_8U);
     fp.copyTo(m(box - win.tl()), fp);
@@ -241,17 +250,6 @@ class PlaqueSearch {
     relief_mask_(win).setTo(255, m & band_(win));
   }
 
-  /** True when at least half of core k lies in relief found already. */
-  bool inRelief(int k, const cv::Rect& bb) const {
-    int in_core = 0, in_relief = 0;
-    for (int y = bb.y; y < bb.y + bb.height; ++y)
-      for (int x = bb.x; x < bb.x + bb.width; ++x)
-        if (lab_.at<int>(y, x) == k) {
-          ++in_core;
-          in_relief += relief_mask_.at<uchar>(y, x) != 0;
-        }
-    return 2 * in_relief >= in_core;
-  }
 
   /** The core's edge level (edge_fraction of its median height, at least the threshold) and its ceiling; false
    *  when the core has under 10 heights. */

@@ -37,6 +37,7 @@ BorderShape borderShape(const cv::Mat& cls, const cv::Mat& hw, const Eigen::Matr
   const Eigen::JacobiSVD<Eigen::Matrix2d> svd(J);
   const double g_min = svd.singularValues()(1), g_max = svd.singularValues()(0);
   if (!J.allFinite() || !(g_min > 0)) return out;
+  out.pixel = g_min;
   // the grid: the finest pixel's size; the window's corners give its extent
   const Eigen::Matrix2d M = J / g_min;
   Eigen::Vector2d lo(1e30, 1e30), hi(-1e30, -1e30);

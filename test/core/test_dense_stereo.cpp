@@ -282,6 +282,21 @@ TEST(DenseStereoBadInput, ErrorsNameTheProblem) {
   expectError([&] { computeDisparity(img, img, rangeOptions(20, 10)); }, {"disparity", "range"}, "min > max");
   expectError([&] { computeDisparity(img, img, rangeOptions(nan, 10)); }, {"disparity", "range"}, "min NaN");
   expectError([&] { computeDisparity(img, img, rangeOptions(0, nan)); }, {"disparity", "range"}, "max NaN");
+  DenseStereoOptions levels = ok;
+  levels.coarse_min_levels = 7;
+  expectError([&] { computeDisparity(img, img, levels); }, {"coarse_min_levels"}, "coarse_min_levels 7");
+}
+
+// The semi-global search runs on a pair halved coarse_min_levels times even when it is narrower than
+// coarse_max_width (skin's fine texture is about one pixel's noise); 0 lets a small pair be searched as it is.
+TEST(DenseStereoCoarseLevel, TheSemiGlobalSearchRunsOnAHalvedPair) {
+  const cv::Mat img = noiseTexture({200, 120}, 1);
+  DenseStereoOptions o = rangeOptions(0, 32);
+  EXPECT_EQ(computeDisparity(img, img, o).coarse_scale, 2);
+  o.coarse_min_levels = 0;
+  EXPECT_EQ(computeDisparity(img, img, o).coarse_scale, 1);
+  o.coarse_min_levels = 2;
+  EXPECT_EQ(computeDisparity(img, img, o).coarse_scale, 4);
 }
 
 TEST(DenseStereoBadInput, RoiPartlyOutsideIsClipped) {

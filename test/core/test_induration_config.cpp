@@ -55,7 +55,7 @@ TEST(IndurationConfig, KeysAreUniqueAndCoverTheHeader) {
   const std::vector<std::string> promised = {
       "z_min", "z_max", "roi",
       // DenseStereoOptions but min/max_disparity and roi
-      "coarse_max_width", "sgbm_mode", "block_size", "p1", "p2", "uniqueness_ratio", "lr_max_diff", "speckle_window",
+      "coarse_max_width", "coarse_min_levels", "sgbm_mode", "block_size", "p1", "p2", "uniqueness_ratio", "lr_max_diff", "speckle_window",
       "speckle_range", "slant_passes", "subpixel", "refine_window", "refine_iterations", "refine_max_shift", "neighbour_check", "max_sigma", "min_texture",
       "min_correlation", "weak_texture",
       "vertical",

@@ -6,7 +6,7 @@
  *
  * Keys (flat): z_min, z_max (m, working depth range -> disparity range; both 0: searched in each pair), roi (x y w h in px, "" or
  * "0 0 0 0" = whole image), every DenseStereoOptions field but min/max_disparity and roi under its own
- * name (coarse_max_width, sgbm_mode, block_size, p1, p2, uniqueness_ratio, lr_max_diff, speckle_window,
+ * name (coarse_max_width, coarse_min_levels, sgbm_mode, block_size, p1, p2, uniqueness_ratio, lr_max_diff, speckle_window,
  * speckle_range, slant_passes, subpixel, refine_window, refine_iterations, refine_max_shift, neighbour_check, max_sigma, min_texture, min_correlation, weak_texture,
  * vertical), and every IndurationOptions field (reference_model, min_height, min_area, smoothing_px, max_smoothing_px,
  * edge_fraction, min_measured_share, exclusion_margin_px, interior_margin_px, max_height, max_incidence_deg, sor_std_ratio, ransac_threshold, fit_points, max_iterations,

@@ -65,6 +65,11 @@ struct DenseStereoOptions {
   cv::Rect roi;                  //!< region of the left rectified image to match; empty = whole image
   // --- semi-global matching (coarse level)
   int coarse_max_width = 1400;   //!< px: the pair is halved (at most 6 times) until the ROI is at most this wide
+  /** The pair is halved at least this many times before the semi-global search (0 ... 6). Skin's fine texture is
+   *  only a few grey levels, about the sensor noise of one pixel: at full resolution SGBM's 5-px blocks match on
+   *  noise, and on skin seen obliquely by one camera (the rims of a limb) they fail in patches from which the fit
+   *  cannot recover. One halving averages four pixels (the noise halved); the fit still ends at full resolution. */
+  int coarse_min_levels = 1;
   std::string sgbm_mode = "sgbm_3way";  //!< "sgbm" (5 paths), "hh" (8 paths, full-image memory), "sgbm_3way"
   int block_size = 5;            //!< odd, 1 ... 11
   int p1 = 0;                    //!< smoothness penalties; 0 = 8 * block^2 and 32 * block^2 (OpenCV's advice)

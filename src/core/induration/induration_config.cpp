@@ -72,6 +72,7 @@ const Table& table() {
         [](PipelineOptions* o, const std::string& v) { o->dense.roi = toRoi("roi", v); }}},
       // --- dense matching (DenseStereoOptions)
       SKIN3D_INT("coarse_max_width", dense.coarse_max_width),
+      SKIN3D_INT("coarse_min_levels", dense.coarse_min_levels),
       SKIN3D_CHOICE("sgbm_mode", dense.sgbm_mode, {"sgbm", "hh", "sgbm_3way"}),
       SKIN3D_INT("block_size", dense.block_size),
       SKIN3D_INT("p1", dense.p1),
@@ -137,6 +138,8 @@ void PipelineOptions::validate() const {
   // The same limits as computeDisparity's (which cannot name the key), checked at start-up.
   require(dense.coarse_max_width >= 64, "coarse_max_width",
           std::to_string(dense.coarse_max_width) + " must be >= 64 px");
+  require(dense.coarse_min_levels >= 0 && dense.coarse_min_levels <= 6, "coarse_min_levels",
+          std::to_string(dense.coarse_min_levels) + " must be 0 ... 6");
   require(dense.block_size >= 1 && dense.block_size <= 11 && dense.block_size % 2 == 1, "block_size",
           std::to_string(dense.block_size) + " must be odd, 1 ... 11");
   require(dense.p1 >= 0, "p1", "must be >= 0 (0 = 8 x block_size^2)");

@@ -50,6 +50,8 @@ void validate(const cv::Mat& left, const cv::Mat& right, const DenseStereoOption
     throw DenseStereoError("refine_window " + std::to_string(o.refine_window) + " must be odd, 3 ... 51");
   if (o.refine_iterations < 1 || o.refine_iterations > 20)
     throw DenseStereoError("refine_iterations " + std::to_string(o.refine_iterations) + " must be 1 ... 20");
+  if (o.coarse_min_levels < 0 || o.coarse_min_levels > 6)
+    throw DenseStereoError("coarse_min_levels " + std::to_string(o.coarse_min_levels) + " must be 0 ... 6");
   if (o.coarse_max_width < 64) throw DenseStereoError("coarse_max_width " + std::to_string(o.coarse_max_width) + " must be >= 64");
   if (!(o.lr_max_diff >= 0) || !(o.refine_max_shift > 0) || !(o.max_sigma > 0) || !(o.min_texture >= 0) ||
       o.uniqueness_ratio < 0 || o.speckle_window < 0 || !(o.speckle_range >= 0) || o.p1 < 0 || o.p2 < 0)

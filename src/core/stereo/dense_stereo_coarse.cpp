@@ -168,8 +168,10 @@ Crops prepareCrops(const cv::Mat& left, const cv::Mat& right, const DenseStereoO
   // [0, range]; the left crop is extended leftwards by the range.
   c.d_min = static_cast<int>(std::floor(o.min_disparity));
   c.range = static_cast<int>(std::ceil(o.max_disparity)) - c.d_min;
-  // halve until the roi is at most coarse_max_width wide and the search at most kMaxCoarseDisparities deep
-  while (((roi.width >> c.levels) > o.coarse_max_width || (c.range >> c.levels) > kMaxCoarseDisparities) && c.levels < 6)
+  // halve coarse_min_levels times, then until the roi is at most coarse_max_width wide and the search at most
+  // kMaxCoarseDisparities deep
+  while ((c.levels < o.coarse_min_levels || (roi.width >> c.levels) > o.coarse_max_width ||
+          (c.range >> c.levels) > kMaxCoarseDisparities) && c.levels < 6)
     ++c.levels;
   c.s = 1 << c.levels;
   // SGBM searches [0, num_disp) at the coarse level and leaves the first num_disp columns unknown: the left

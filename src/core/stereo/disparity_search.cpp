@@ -94,6 +94,7 @@ DisparitySearch searchDisparityRange(const cv::Mat& left, const cv::Mat& right, 
   o.subpixel = "sgbm";
   o.slant_passes = 0;
   o.coarse_max_width = std::max(64, l.cols);
+  o.coarse_min_levels = 0;  // the reduced pair is already averaged
   if (base.roi.area() > 0) {
     const cv::Rect roi(cvFloor(base.roi.x / s), cvFloor(base.roi.y / s), std::max(16, cvCeil(base.roi.width / s)),
                        std::max(16, cvCeil(base.roi.height / s)));

@@ -43,7 +43,8 @@
  *     few px closed first; the edge of the measured surface, islands of mismatches), with less than
  *     `min_measured_share` of their footprint measured (scattered matches), whose footprint fills less than half
  *     the ellipse of its second moments (pieces strung along an edge or scattered: a plaque is one patch of skin),
- *     or higher than `max_height`.
+ *     smaller than 4 correlation areas of the height noise with a top not 3 stated sigma above the detection
+ *     threshold (one mismatch of the matcher looks the same), or higher than `max_height`.
  *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
  *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
  *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by

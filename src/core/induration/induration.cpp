@@ -153,8 +153,10 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
                            ": lower ones cannot be told from the noise (a nearer working "
                            "distance, a longer baseline or a finer camera lowers it)");
   // the height noise the plaques' uncertainties rest on, in blocks of 4 matcher ramps (the noise's correlation
-  // reaches about one matching window)
-  const HeightNoise noise = heightNoise(res.height_map, healthy, std::max(8, 4 * o.interior_margin_px));
+  // reaches about one matching window), on the healthy skin within the noise band (as the detection threshold: the
+  // background or mismatches matched centimetres off the skin would widen it many times)
+  const HeightNoise noise = heightNoise(res.height_map, healthy & (cv::abs(res.height_map) < s.band),
+                                        std::max(8, 4 * o.interior_margin_px));
   res.height_noise = noise.sigma;
   res.noise_correlation_px2 = noise.correlation_area;
   findPlaques(s, scales, band, reach, noise, res);

@@ -30,6 +30,10 @@ constexpr double kRingWidth = 1.0e-3;
 constexpr double kWideMeasuredShare = 0.8;
 /** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
 constexpr double kMinEllipseFill = 0.5;
+/** Under this many correlation areas of the height noise (about the fit's window one level below full resolution,
+ *  where the matcher starts), with a top not 3 stated sigma above the threshold, a region is what one mismatch makes:
+ *  a window-sized patch on a wrong disparity (rig study: mismatches of 1.2-4.2 areas, tops stated 0.3-1 mm). */
+constexpr double kMismatchAreas = 4.0;
 
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
@@ -556,6 +560,12 @@ class PlaqueSearch {
     if (std::isfinite(sur.offset) && sur.pixels > 0)
       offset2 = std::max(0.0, sur.offset * sur.offset - kHalfPi * sur.sigma * sur.sigma * noise_.correlation_area / sur.pixels);
     p.top_height_sigma = std::sqrt(top_sigma * top_sigma + offset2);
+    if (!(p.top_height - 3 * p.top_height_sigma > threshold_) && t.px < kMismatchAreas * noise_.correlation_area) {
+      mismatch_.emplace_back(t.px, num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box) + ", top " +
+                                       num(std::round(p.top_height * 1e5) / 100) + " +- " +
+                                       num(std::round(p.top_height_sigma * 1e5) / 100) + " mm");
+      return;
+    }
     p.pasi_class = pasiClass(p.top_height, o_.pasi_boundaries);
     p.pixels = t.px;
     p.measured_fraction = t.px > 0 ? t.nc / static_cast<double>(t.px) : 0.0;
@@ -627,16 +637,18 @@ class PlaqueSearch {
                                   : std::to_string(at_edge_.size()) + " raised regions were ignored: they lie at the edge of the "
                                     "measured surface (their height above the reference means nothing); the largest: " + list);
     }
-    if (!low_.empty())
-      res_.warnings.push_back(std::to_string(low_.size()) + " raised region" + (low_.size() == 1 ? " was" : "s were") +
-                              " ignored: drawn on the smoothed heights, the measured heights inside stand less than the "
-                              "detection threshold (" + num(std::round(first_threshold_ * 1e5) / 100) + " mm) above the "
-                              "reference on average (the noise, not a plaque); the largest: " + largest(low_));
-    if (!scattered_.empty())
-      res_.warnings.push_back(std::to_string(scattered_.size()) + " raised region" +
-                              (scattered_.size() == 1 ? " was" : "s were") + " ignored: scattered pieces fill under " +
-                              num(std::round(100 * kMinEllipseFill)) + " % of the ellipse of their moments (a plaque is one "
-                              "patch of skin); the largest: " + largest(scattered_));
+    auto ignored = [&](std::vector<std::pair<double, std::string>>& v, const std::string& why) {
+      if (!v.empty()) res_.warnings.push_back(std::to_string(v.size()) + " raised region" + (v.size() == 1 ? " was" : "s were") +
+                                " ignored: " + why + "; the largest: " + largest(v));
+    };
+    ignored(low_, "drawn on the smoothed heights, the measured heights inside stand less than the detection threshold (" +
+                      num(std::round(first_threshold_ * 1e5) / 100) + " mm) above the reference on average (the noise, not a plaque)");
+    ignored(scattered_, "scattered pieces fill under " + num(std::round(100 * kMinEllipseFill)) +
+                            " % of the ellipse of their moments (a plaque is one patch of skin)");
+    ignored(mismatch_, "smaller than " + num(kMismatchAreas) + " correlation areas of the height noise (" +
+                           num(std::round(kMismatchAreas * noise_.correlation_area)) + " px) with a top not 3 stated sigma above "
+                           "the detection threshold: one mismatch of the matcher (a window-sized patch settled on a wrong "
+                           "disparity) looks the same (a second view of the skin can tell)");
     if (!relief_.empty())
       res_.warnings.push_back(std::to_string(relief_.size()) + " raised region" + (relief_.size() == 1 ? " is" : "s are") +
                               " not plaque-like: a plaque is sharply demarcated with one top, these rise smoothly (the "
@@ -645,13 +657,9 @@ class PlaqueSearch {
                               "not measured as plaques (hatched in the height map; a plaque on such relief cannot be told "
                               "from it: measure it from a view where the skin around it is smooth); the largest: " +
                               largest(relief_));
-    if (!sparse_.empty()) {
-      const std::string list = largest(sparse_);
-      res_.warnings.push_back(std::to_string(sparse_.size()) + " raised region" + (sparse_.size() == 1 ? " was" : "s were") +
-                              " ignored: under " + num(std::round(100 * o_.min_measured_share)) +
-                              " % of the footprint has a height (scattered matches, mostly where the skin turns away from "
-                              "the rig, are not a plaque); the largest: " + list);
-    }
+    ignored(sparse_, "under " + num(std::round(100 * o_.min_measured_share)) +
+                         " % of the footprint has a height (scattered matches, mostly where the skin turns away from the rig, "
+                         "are not a plaque)");
   }
 
   const Surface& s_;
@@ -677,6 +685,7 @@ class PlaqueSearch {
   std::vector<std::pair<double, std::string>> scattered_;  // ignored regions of scattered pieces: area, description
   std::vector<std::pair<double, std::string>> relief_;    // raised regions shaped like relief: area, description
   std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
+  std::vector<std::pair<double, std::string>> mismatch_;  // ignored regions no larger or clearer than a mismatch
 };
 
 }  // namespace

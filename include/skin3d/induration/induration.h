@@ -28,7 +28,8 @@
  *  3. Height map: signed distance above the reference (m), smoothed with a Gaussian of `smoothing_px`
  *     (NaN-aware) for segmentation only; statistics use the unsmoothed heights.
  *  4. Plaques, searched within the working band: the pixels whose ray meets the reference where it faces both
- *     cameras within `max_incidence_deg` (the reference's geometry, not the measured points'). Connected
+ *     cameras within `max_incidence_deg` (the reference's geometry, not the measured points'; outside it no depth
+ *     is reported: IndurationResult::oblique). Connected
  *     regions (8-connected) of the smoothed map above the detection threshold (`min_height`, or 3 robust sigma
  *     of the smoothed healthy-skin heights where the surface is noisier), at least `min_area` on the reference
  *     (20 mm^2: a lesion under 5 mm across is a papule, not a plaque); each
@@ -205,6 +206,11 @@ struct IndurationResult {
   /** CV_8U: 255 on raised regions that are relief, not plaques (Plaque::border_width: a smooth rise, or two tops);
    *  part of `unfollowed` (empty: none) */
   cv::Mat relief;
+  /** CV_8U: 255 on the measured points whose reference faces a camera at more than max_incidence_deg (empty when
+   *  that is 90 or no reference was fitted). Their heights are NaN in height_map: matched so obliquely, skin's
+   *  depths are wrong by pixels of disparity, far more than their stated sigma (docs/validation.md), and
+   *  FrameMeasurer takes them out of the disparity map and the cloud too (UnknownReason::kOblique). */
+  cv::Mat oblique;
   /** The healthy skin's robust scatter about the reference over the matcher's median stated depth sigma (1: the
    *  reference explains the skin down to the noise; skin relief and model error raise it). */
   double reference_noise_ratio = std::numeric_limits<double>::quiet_NaN();

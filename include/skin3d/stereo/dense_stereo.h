@@ -121,7 +121,8 @@ enum class UnknownReason : uchar {
   kDisagreement = 5,   //!< the fit moved more than refine_max_shift from the semi-global value
   kIsland = 6,         //!< a small island of valid pixels (speckle filter at full resolution)
   kBorder = 7,         //!< the matching window reaches beyond either image
-  kCount = 8
+  kOblique = 8,        //!< matched, but the skin faces a camera at more than max_incidence_deg (induration.h)
+  kCount = 9
 };
 
 /** @brief Short name of an UnknownReason ("texture", "sigma", ...). */
@@ -157,7 +158,7 @@ std::string describeUnknown(const DisparityMap& map);
 /**
  * @brief Picture of why pixels have no disparity: the left image in grey, unknown pixels coloured by reason
  * (texture blue, sigma yellow, correlation red, disagreement magenta, island cyan, no semi-global answer
- * orange, border dark grey), a legend in the top-left corner. Empty if the map has no unknown_reason.
+ * orange, border dark grey, oblique pink), a legend in the top-left corner. Empty if the map has no unknown_reason.
  */
 cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left);
 

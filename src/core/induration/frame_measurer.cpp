@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <yaml-cpp/yaml.h>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
@@ -46,6 +47,35 @@ void verticalDisparity(const stereo::DisparityMap& map, FrameRecord* r) {
                   "spread %.2f px (a stale calibration, unsynchronised or rolling-shutter frames?)",
                   r->vertical_median, r->vertical_spread);
     r->result.warnings.push_back(buf);
+  }
+}
+
+/** The points the measurement found too oblique (IndurationResult::oblique) leave the disparity map and the cloud:
+ *  unknown for the reason kOblique, so that disparity.tiff, surface.ply and a site's fusion do not hold them. */
+void dropOblique(FrameMeasurement* m) {
+  const cv::Mat& ob = m->record.result.oblique;
+  stereo::DisparityMap& d = m->disparity;
+  if (ob.empty() || ob.size() != d.disparity.size() || ob.size() != m->cloud.xyz.size()) return;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  long n = 0;
+  for (int y = 0; y < ob.rows; ++y) {
+    const uchar* o = ob.ptr<uchar>(y);
+    for (int x = 0; x < ob.cols; ++x) {
+      if (!o[x] || !std::isfinite(d.disparity.at<float>(y, x))) continue;
+      d.disparity.at<float>(y, x) = nan;
+      if (!d.sigma.empty()) d.sigma.at<float>(y, x) = nan;
+      if (!d.vertical.empty()) d.vertical.at<float>(y, x) = nan;
+      if (!d.unknown_reason.empty()) d.unknown_reason.at<uchar>(y, x) = static_cast<uchar>(stereo::UnknownReason::kOblique);
+      m->cloud.xyz.at<cv::Vec3f>(y, x) = cv::Vec3f(nan, nan, nan);
+      if (!m->cloud.sigma.empty()) m->cloud.sigma.at<float>(y, x) = nan;
+      ++n;
+    }
+  }
+  const double area = std::max(1, d.roi.area());
+  d.valid_fraction = std::max(0.0, d.valid_fraction - n / area);
+  if (d.unknown_share.size() == static_cast<size_t>(stereo::UnknownReason::kCount)) {
+    d.unknown_share[static_cast<size_t>(stereo::UnknownReason::kOblique)] += n / area;
+    d.unknown_share[0] = d.valid_fraction;
   }
 }
 
@@ -109,6 +139,7 @@ void FrameMeasurer::finish(FrameMeasurement* m) const {
   const auto t1 = Clock::now();
   m->record.result = measureInduration(m->cloud, options_.induration);
   m->seconds_measure = std::chrono::duration<double>(Clock::now() - t1).count();
+  dropOblique(m);
   for (const auto& w : m->disparity.warnings)
     m->record.result.warnings.insert(m->record.result.warnings.begin(), "dense stereo: " + w);
   if (!m->range_note.empty())

@@ -111,8 +111,8 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   res.band_fraction = res.known_points > 0 ? cv::countNonZero(band) / static_cast<double>(res.known_points) : 1.0;
   if (res.band_fraction < 0.995)
     res.warnings.push_back(num(std::round(1000 * (1 - res.band_fraction)) / 10) + " % of the measured surface faces a camera at more than " +
-                           num(o.max_incidence_deg) + " deg (the sides of a limb): not searched for plaques; turn the skin "
-                           "towards the rig to measure there");
+                           num(o.max_incidence_deg) + " deg (the sides of a limb): not measured there (depths matched so "
+                           "obliquely are unreliable); turn the skin towards the rig to measure there");
 
   // ---- plaques: regions above the detection threshold, re-drawn at edge_fraction of their median height
   const cv::Mat healthy = s.known_mask & ~best.plaque_mask & band;
@@ -161,6 +161,20 @@ IndurationResult measureInduration(const stereo::DenseCloud& cloud, const Indura
   res.noise_correlation_px2 = noise.correlation_area;
   findPlaques(s, scales, band, reach, noise, res);
   checkReferenceFollows(s, hs, band, res);
+  if (o.max_incidence_deg < 90) {
+    // not reported: the sides (the reference faces a camera at more than max_incidence_deg) and the points past its
+    // silhouette within max_height of it (the rim and what was matched as the rim: wrong by pixels); the background
+    // past the silhouette stays
+    res.oblique = cv::Mat(inc.size(), CV_8U, cv::Scalar(0));
+    for (int y = 0; y < inc.rows; ++y) {
+      const float *i = inc.ptr<float>(y), *h = res.height_map.ptr<float>(y);
+      const uchar* k = s.known_mask.ptr<uchar>(y);
+      uchar* ob = res.oblique.ptr<uchar>(y);
+      for (int x = 0; x < inc.cols; ++x)
+        if (k[x] && (i[x] > o.max_incidence_deg || (std::isnan(i[x]) && std::fabs(h[x]) <= o.max_height))) ob[x] = 255;
+    }
+    res.height_map.setTo(kNaN, res.oblique);
+  }
   if (res.plaques.empty())
     res.warnings.push_back(res.reference_follows
                                ? "no plaque stands more than " + num(o.min_height * 1e3) + " mm above the reference"

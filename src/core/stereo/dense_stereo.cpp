@@ -153,6 +153,7 @@ const char* unknownReasonName(UnknownReason r) {
     case UnknownReason::kDisagreement: return "disagreement";
     case UnknownReason::kIsland: return "island";
     case UnknownReason::kBorder: return "border";
+    case UnknownReason::kOblique: return "oblique";
     default: return "?";
   }
 }
@@ -173,7 +174,8 @@ std::string describeUnknown(const DisparityMap& map) {
 cv::Mat unknownReasonImage(const DisparityMap& map, const cv::Mat& left) {
   if (map.unknown_reason.empty() || left.size() != map.unknown_reason.size()) return {};
   static const cv::Vec3b colour[] = {{0, 0, 0},     {0, 140, 255}, {255, 80, 0},   {0, 220, 255},
-                                     {0, 0, 230},   {220, 0, 220}, {230, 230, 0},  {60, 60, 60}};  // BGR
+                                     {0, 0, 230},   {220, 0, 220}, {230, 230, 0},  {60, 60, 60},
+                                     {150, 150, 255}};  // BGR
   cv::Mat grey = left, out;
   if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
   if (grey.depth() != CV_8U) grey.convertTo(grey, CV_8U, grey.depth() == CV_16U ? 1.0 / 256 : 255.0);

@@ -9,10 +9,12 @@
  *    axis, (u along the axis, v = R theta around it, w = distance from the axis); anything else is a plane, (u, v) in
  *    it and w along its normal. `SiteSurface::model` says which ("cylinder" or "plane").
  * 2. **Registration** (`register_frames`): each frame after the first is aligned to the surface fused so far by
- *    point-to-plane Gauss-Newton (Levenberg-damped, Huber-weighted, every `register_stride`-th pixel), starting from
- *    the pose given with it; the residual of a point is n . (X - P), P the fused surface where the point falls and n
- *    its normal, weighted by the point's and the cell's sigma. A frame that overlaps the fused surface on less than
- *    `min_overlap` of its samples, or whose alignment does not converge, is left out and named.
+ *    point-to-plane Levenberg-Marquardt (Huber-weighted, every `register_stride`-th pixel, a step taken only when it
+ *    lowers the cost), starting from the pose given with it; the residual of a point is n . (X - P), P the fused
+ *    surface where the point falls and n its normal, weighted by the point's and the cell's sigma. It stops when no
+ *    step lowers the cost or a step moves the samples by under a tenth of their residual scatter (at most
+ *    `register_iterations`). A frame that overlaps the fused surface on less than `min_overlap` of its samples, or
+ *    whose alignment moves it more than `max_correction`, is left out and named.
  * 3. **Fusion**: every sample within `max_incidence_deg` of the body normal in both cameras is splatted bilinearly
  *    into cells of `cell` m (0: the first frame's median pixel footprint on the skin: no finer than the data), with
  *    the weight cos^2(incidence) / sigma^2 (sigma the matcher's along the ray; a grazing view's lateral footprint

@@ -87,6 +87,29 @@ BodyModel fitBodyModel(const FusedMap& m, const cv::Mat& exclude);
 /** The site measurement on a fused map. */
 SiteResult measureSite(const FusedMap& m, const induration::IndurationOptions& options, const std::vector<SiteFrame>& frames);
 
+/** A frame's skin point and its sigma along the ray (site_fusion.cpp, skinSamples). */
+struct Sample {
+  Eigen::Vector3d X;    // camera frame
+  float sigma;          // m along the ray
+};
+
+/** What fusing a frame needs of its cameras. */
+struct View {
+  Eigen::Vector3d rc;  // the right camera's centre, camera frame
+  bool have_right;
+  double cos_max;      // cos(site_max_incidence_deg)
+};
+
+/** A camera-frame point in world and on the surface, and the cosine of the larger incidence of both cameras on the
+ *  body's normal there. */
+double incidenceCos(const FusionGrid& g, const View& v, const Eigen::Isometry3d& T, const Eigen::Vector3d& Xc,
+                    Eigen::Vector3d* Xw, Eigen::Vector3d* uvw);
+
+/** Aligns a frame to the fused surface from its given pose (site_fusion.h, 2.; site_register.cpp): sets F->pose,
+ *  overlap, correction_rms, registration_iterations; false (F->reason says why) when it must be left out. */
+bool registerFrame(const FusionGrid& g, const View& view, const std::vector<Sample>& samples, const SiteOptions& o,
+                   const Eigen::Isometry3d& T_W_C, SiteFrame* F);
+
 }  // namespace site_detail
 }  // namespace site
 }  // namespace skin3d

@@ -181,17 +181,6 @@ void SiteFusion::skip(double stamp, const std::string& reason) {
 
 namespace site_detail {
 
-struct Sample {
-  Eigen::Vector3d X;    // camera frame
-  float sigma;          // m along the ray
-};
-
-struct View {
-  Eigen::Vector3d rc;  // the right camera's centre, camera frame
-  bool have_right;
-  double cos_max;      // cos(site_max_incidence_deg)
-};
-
 /** A camera-frame point in world and on the surface, and the cosine of the larger incidence of both cameras on the
  *  body's normal there. */
 double incidenceCos(const FusionGrid& g, const View& v, const Eigen::Isometry3d& T, const Eigen::Vector3d& Xc,
@@ -297,93 +286,6 @@ std::vector<Sample> skinSamples(const geometry::DenseCloud& cloud, const indurat
     }
   }
   return samples;
-}
-
-/** Aligns a frame to the fused surface from its given pose (site_fusion.h, 2.): sets F->pose, overlap,
- *  correction_rms, registration_iterations; false (F->reason says why) when it must be left out. */
-bool registerFrame(const FusionGrid& g, const View& view, const std::vector<Sample>& samples, const SiteOptions& o,
-                   const Eigen::Isometry3d& T_W_C, SiteFrame* F) {
-  const double cos_max = view.cos_max;
-  Eigen::Isometry3d T = T_W_C;
-  const int stride = o.register_stride;
-  std::vector<int> pick;
-  for (std::size_t k = 0; k < samples.size(); k += static_cast<std::size_t>(stride * stride)) pick.push_back(static_cast<int>(k));
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (int k : pick) c += T_W_C * samples[k].X;
-  c /= static_cast<double>(pick.size());
-  int found = 0;
-  double scale = 0;
-  for (int it = 0; it < o.register_iterations; ++it) {
-    Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-    std::vector<double> res;
-    std::vector<Eigen::Matrix<double, 1, 6>> Js;
-    std::vector<double> ws;
-    found = 0;
-    for (int k : pick) {
-      Eigen::Vector3d Xw, uvw;
-      if (incidenceCos(g, view, T, samples[k].X, &Xw, &uvw) < cos_max) continue;
-      double val, sig, su, sv;
-      if (!g.lookup(uvw.x(), uvw.y(), &val, &sig, &su, &sv)) continue;
-      ++found;
-      const Eigen::Vector3d base(uvw.x(), uvw.y(), g.wref + val);
-      const Eigen::Vector3d P = g.surf.toWorld(base), out = g.surf.outward(base);
-      Eigen::Vector3d tu, tv;
-      g.surf.tangents(base, &tu, &tv);
-      Eigen::Vector3d n = (tu + su * out).cross(tv + sv * out).normalized();
-      if (n.dot(out) < 0) n = -n;
-      Eigen::Matrix<double, 1, 6> J;
-      const double r = pointToPlane(Xw - c, P - c, n, &J);
-      res.push_back(r);
-      Js.push_back(J);
-      ws.push_back(1.0 / (static_cast<double>(samples[k].sigma) * samples[k].sigma + sig * sig));
-    }
-    if (found < 50) break;
-    std::vector<double> a(res.size());
-    for (std::size_t q = 0; q < res.size(); ++q) a[q] = std::fabs(res[q]);
-    std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
-    scale = std::max(1.4826 * a[a.size() / 2], 1e-6);
-    const double kh = 2.0 * scale;
-    for (std::size_t q = 0; q < res.size(); ++q) {
-      const double hub = std::fabs(res[q]) <= kh ? 1.0 : kh / std::fabs(res[q]);
-      const double w = ws[q] * hub;
-      H += w * Js[q].transpose() * Js[q];
-      b += w * Js[q].transpose() * res[q];
-    }
-    const double lambda = 1e-6 * H.diagonal().maxCoeff();
-    H.diagonal().array() += lambda;
-    const Eigen::Matrix<double, 6, 1> d = -H.ldlt().solve(b);
-    if (!d.allFinite()) break;
-    const Eigen::Matrix3d dR = geometry::so3Exp(d.head<3>());
-    Eigen::Isometry3d Tn = Eigen::Isometry3d::Identity();
-    Tn.linear() = dR * T.linear();
-    Tn.translation() = dR * (T.translation() - c) + c + d.tail<3>();
-    T = Tn;
-    F->registration_iterations = it + 1;
-    if (d.head<3>().norm() < 1e-6 && d.tail<3>().norm() < 1e-7) break;  // 0.1 um at the skin
-  }
-  int usable = 0;
-  for (int k : pick) {
-    Eigen::Vector3d Xw, uvw;
-    if (incidenceCos(g, view, T_W_C, samples[k].X, &Xw, &uvw) >= cos_max) ++usable;
-  }
-  F->overlap = usable > 0 ? static_cast<double>(found) / usable : 0.0;
-  if (F->overlap < o.min_overlap) {
-    F->reason = "it overlaps the fused site on " + std::to_string(static_cast<int>(std::lround(100 * F->overlap))) +
-               " % of its samples (site_min_overlap " + std::to_string(static_cast<int>(std::lround(100 * o.min_overlap))) + " %)";
-    return false;
-  }
-  double c2 = 0;
-  for (int k : pick) c2 += ((T * samples[k].X) - (T_W_C * samples[k].X)).squaredNorm();
-  F->correction_rms = std::sqrt(c2 / pick.size());
-  if (F->correction_rms > o.max_correction) {
-    F->reason = "its registration moved it by " + std::to_string(F->correction_rms * 1e3) +
-               " mm RMS from the pose given (site_max_correction_mm " + std::to_string(o.max_correction * 1e3) + ")";
-    return false;
-  }
-  F->pose = T;
-
-  return true;
 }
 
 /** Compares a frame with the fused surface (its seams) and fuses it (site_fusion.h, 3. and 5.); returns the samples

@@ -399,14 +399,21 @@ TEST(Induration, TheTopsStatedUncertaintyIsItsSpreadOverNoiseDraws) {
 // rig's fixed 0.2 mm band. The reference's fits, RANSAC start and detection threshold must work in a band that holds
 // this noise (measured, not assumed), the alternation must not run away, and the two plaques (0.8 and 1.1 mm, 12 mm
 // across) must be found with their tops within 3 stated sigma and nothing else called a plaque.
+/** A coarse rig's skin: curved (0.3 m radius), heights scattering 0.3 mm per pixel, correlated over `blur_px`, with
+ *  two plaques 12 mm across, 1.1 mm high left of the axis and 0.8 mm right of it. */
+Scene coarseRigWithTwoPlaques(std::uint64_t seed, double blur_px) {
+  Scene s;
+  s.seed = seed;
+  s.curvature = 1.0 / 0.3;
+  s.noise = 0.3e-3;
+  s.noise_blur_px = blur_px;
+  s.rounds = {{-0.02, 0.01, 0.006, 1.1e-3, 1.0e-3, 0.0}, {0.025, -0.01, 0.006, 0.8e-3, 1.0e-3, 0.0}};
+  return s;
+}
+
 TEST(Induration, ANoisyRigsReferenceHoldsAndItsPlaquesAreFound) {
   for (const std::uint64_t seed : {3u, 4u, 5u}) {
-    Scene s;
-    s.seed = seed;
-    s.curvature = 1.0 / 0.3;
-    s.noise = 0.3e-3;
-    s.noise_blur_px = 2.0;
-    s.rounds = {{-0.02, 0.01, 0.006, 1.1e-3, 1.0e-3, 0.0}, {0.025, -0.01, 0.006, 0.8e-3, 1.0e-3, 0.0}};
+    const Scene s = coarseRigWithTwoPlaques(seed, 2.0);
     const auto r = measureInduration(s.cloud(), IndurationOptions());
     ASSERT_TRUE(r.reference_ok) << "seed " << seed;
     EXPECT_TRUE(r.reference_follows) << "seed " << seed << ": unfollowed share " << r.unfollowed_share;
@@ -428,13 +435,8 @@ TEST(Induration, ANoisyRigsReferenceHoldsAndItsPlaquesAreFound) {
 TEST(Induration, AMismatchSizedPatchIsNotAPlaque) {
   int patches_named = 0;
   for (const std::uint64_t seed : {3u, 4u, 5u}) {
-    Scene s;
-    s.seed = seed;
-    s.curvature = 1.0 / 0.3;
-    s.noise = 0.3e-3;
-    s.noise_blur_px = 3.0;
-    s.rounds = {{-0.02, 0.01, 0.006, 1.1e-3, 1.0e-3, 0.0}, {0.025, -0.01, 0.006, 0.8e-3, 1.0e-3, 0.0},
-                {0.0, 0.012, 0.0033, 1.5e-3, 0.3e-3, 0.0}};
+    Scene s = coarseRigWithTwoPlaques(seed, 3.0);
+    s.rounds.push_back({0.0, 0.012, 0.0033, 1.5e-3, 0.3e-3, 0.0});
     const auto r = measureInduration(s.cloud(), IndurationOptions());
     ASSERT_TRUE(r.reference_ok) << "seed " << seed;
     const Eigen::Vector3d patch = s.origin + 0.012 * s.e2 + s.surface(0.0, 0.012) * s.normal;

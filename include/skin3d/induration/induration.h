@@ -39,7 +39,11 @@
  *     the blur of the matching window moves it neither in nor out; where the matcher left the step edge
  *     unknown, the gap is bridged from both sides so the boundary falls in its middle), holes filled; largest
  *     cores first, the box around a core widened while the region reaches its border, and a core whose region
- *     reaches a plaque drawn already is that plaque's shoulder (no valley separates them), not a plaque. Ignored,
+ *     reaches a plaque drawn already is that plaque's shoulder (no valley separates them), not a plaque. A region
+ *     that rises above the skin around it (its border's profile) by less than the detection threshold and by less
+ *     than that skin stands above the reference is a bump on raised skin (a low plaque the noise lifts above the
+ *     threshold in pieces): it is drawn again at half its top's height, where the profile measured raised skin
+ *     around it, as the plaque it is part of (or ignored, with a warning). Ignored,
  *     with a warning: regions whose surroundings within the band are less than 80 % known (the matcher's gaps of a
  *     few px closed first; the edge of the measured surface, islands of mismatches), with less than
  *     `min_measured_share` of their footprint measured (scattered matches), whose footprint fills less than half
@@ -47,8 +51,11 @@
  *     smaller than 4 correlation areas of the height noise with a top not 3 stated sigma above the detection
  *     threshold (one mismatch of the matcher looks the same), or higher than `max_height`.
  *  5. Per plaque: centroid (mean of its points), area (sum of each pixel's footprint on the reference
- *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|),
- *     the share of its pixels that have a height (a warning under 90 %), volume, and over its interior (eroded by
+ *     (its tangent plane at the plaque for the quadric): the ray's intersection with it, |n . (dX/du x dX/dv)|;
+ *     a low plaque's, outlined at the detection threshold, scaled to the area within half its rise from the skin
+ *     around to its top, from the border's profile),
+ *     the share of its pixels that have a height (a warning under 90 %), volume (the footprint's and the skirt's
+ *     outside the outline, from the border's profile), and over its interior (eroded by
  *     `interior_margin_px`: the matching window turns the edge into a ramp about a window wide) mean / std
  *     height, max height (the 99th percentile: one noisy pixel must not set it); the top height: the heights
  *     binned by their distance from the outline, the bins' medians from 2 `interior_margin_px` in (half way to the
@@ -154,7 +161,7 @@ struct ReferenceSurface {
 struct Plaque {
   int id = 0;                  //!< 1, 2, ... in order of decreasing area
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  //!< m, frame of the cloud
-  double area = 0;             //!< m^2 on the reference
+  double area = 0;             //!< m^2 on the reference, within the outline (a low plaque's: within half its rise)
   /** m: the top's height, the level the height profile reaches at the plaque's centre (flat or domed top; see the
    *  file comment); the PASImeter class is this height's, as the card is matched to a plaque's elevation. */
   double top_height = 0;
@@ -173,7 +180,10 @@ struct Plaque {
   /** share of the footprint's outline that borders unmeasured skin (not a step edge's gap with measured skin
    *  across it): above 0.1 the plaque may extend there (a warning says so), and its area is what was measured */
   double outline_unmeasured = 0;
-  double volume = 0;           //!< m^3, sum of height x footprint over the measured pixels / measured_fraction
+  /** m^3: sum of height x footprint over the measured pixels / measured_fraction, plus the skirt outside the
+   *  outline (the border profile's rise over the skin around, ring by ring while it stands 2 errors above it, at
+   *  most 3 border widths beyond the half-rise crossing) */
+  double volume = 0;
   /** m on the skin: how wide the lower part of the border is, from 20 to 50 % of the rise from the skin around to
    *  the top (on a plaque's border ramp of at most 2 mm, blurred by the matcher; healthy relief rises from a longer
    *  foot: above 1.75 times a plaque's widest a raised region is relief, not a plaque). NaN where the profile was

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: BSD-3-Clause
 // Private helpers of the induration measurement, shared by its files (not installed):
 //   induration_maps.cpp       height map, smoothing, detection threshold, incidence, footprints, regions;
+//   induration_ignored.cpp    the warnings listing the raised regions found not to be plaques;
 //   induration_reference.cpp  reference surface fits (plane, quadratic, quadric) and their alternation;
 //   induration_plaques.cpp    the plaque search;
 //   induration_relief.cpp     the shape of a raised region's border: a plaque's or healthy relief's;
@@ -161,6 +162,17 @@ struct BorderShape {
   double rise = 0;     //!< m: top level over the skin around
   double reach = 0;    //!< m: from the outline out to where the rise falls under the detection threshold
   double pixel = 0;    //!< m: the image's finest pixel on the skin there (along its shorter axis)
+  double base = 0;           //!< m: the skin around's level
+  double rise_error = std::numeric_limits<double>::quiet_NaN();  //!< m: the profile's standard error (median bin)
+  double skirt_volume = 0;  //!< m^3: the rise over the skin around, outside the outline, out to where it ends
+  /** the profile from outside in to its highest bin: (signed distance to the outline in grid px, inside > 0; the
+   *  3-bin running mean, m) */
+  std::vector<std::pair<double, double>> profile;
+  std::vector<double> cells;  //!< grid cells by signed distance, bins of cell_bin px from -cells_reach (known or not)
+  double cell_bin = 1, cells_reach = 0;
+  /** The area within the profile's first crossing of `level` (m, scanning inward) over the area within the outline;
+   *  NaN when the profile does not cross it. */
+  double areaRatioAt(double level) const;
   bool clear = false;  //!< the rise stands kBorderClear profile errors above the noise
   bool relief() const { return clear && (width > limit || dip > kMaxInwardDip); }
 };
@@ -174,10 +186,36 @@ Eigen::Matrix2d pixelOnPlane(const cv::Mat& ray, const cv::Rect& box, const Refe
  *  distance to the outline there, from as far outside as the region is deep (the foot of a bell lies outside a
  *  half-height outline) to its deepest point. The levels are the median of the outer half of the outside bins (the
  *  skin around) and the highest of the inside bins (3-bin running means); the crossings of 20 and 50 % of the rise
- *  are the first, scanning inward. `noise`: the healthy skin's height noise (the bins' errors, the blur);
+ *  are the first, scanning inward. The skirt: the bins outside the outline, scanning outward until the rise falls
+ *  within 2 errors or 3 border widths beyond the half-rise crossing, each bin's rise over the skin around times its
+ *  ring's area (every grid cell at that distance on the skin around that may be used, measured or not). `noise`: the healthy skin's height noise (the bins' errors, the blur);
  *  `threshold`: the detection threshold (m; the skirt's reach). */
 BorderShape borderShape(const cv::Mat& cls, const cv::Mat& heights, const Eigen::Matrix2d& J, const HeightNoise& noise,
                         double threshold);
+
+/** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
+constexpr double kMinEllipseFill = 0.5;
+/** Under this many correlation areas of the height noise (about the fit's window one level below full resolution,
+ *  where the matcher starts), with a top not 3 stated sigma above the threshold, a region is what one mismatch makes:
+ *  a window-sized patch on a wrong disparity (rig study: mismatches of 1.2-4.2 areas, tops stated 0.3-1 mm). */
+constexpr double kMismatchAreas = 4.0;
+
+// ---- induration_ignored.cpp
+/** The raised regions the plaque search found not to be plaques, by kind: (size in px, description) each. */
+struct IgnoredRegions {
+  using List = std::vector<std::pair<double, std::string>>;
+  List at_edge;    //!< at the edge of the measured surface
+  List sparse;     //!< too few heights
+  List scattered;  //!< scattered pieces
+  List relief;     //!< shaped like relief
+  List low;        //!< the interior not above the threshold
+  List on_raised;  //!< a bump on raised skin
+  List mismatch;   //!< no larger or clearer than a mismatch
+};
+/** One warning per kind of ignored region (a limb's silhouette can leave dozens), the three largest named;
+ *  `threshold`: the first scale's detection threshold (m). */
+void warnIgnored(double threshold, double min_measured_share, double correlation_area, IgnoredRegions* ignored,
+                 std::vector<std::string>* warnings);
 
 // ---- induration_follow.cpp
 /** Above this share of the working band departing from the reference, the reference does not follow the skin. */

@@ -28,13 +28,6 @@ constexpr double kRingWidth = 1.0e-3;
  *  were filled across gaps and averaged over several mm, and over a sparse region they say little (the at-edge
  *  rule asks the same of a plaque's surroundings). */
 constexpr double kWideMeasuredShare = 0.8;
-/** A plaque's footprint fills at least half the ellipse of its second moments (ellipseFill). */
-constexpr double kMinEllipseFill = 0.5;
-/** Under this many correlation areas of the height noise (about the fit's window one level below full resolution,
- *  where the matcher starts), with a top not 3 stated sigma above the threshold, a region is what one mismatch makes:
- *  a window-sized patch on a wrong disparity (rig study: mismatches of 1.2-4.2 areas, tops stated 0.3-1 mm). */
-constexpr double kMismatchAreas = 4.0;
-
 /** Sums over one plaque's region (footprint, heights of its interior, sigma along the local normal). */
 struct PlaqueSums {
   double area = 0, sh = 0, sh2 = 0, ssig2 = 0, vol = 0;
@@ -103,8 +96,8 @@ class PlaqueSearch {
       relief_cores_.setTo(0);
     }
     renumberByArea();
-    warnIgnored();
-    if (!relief_.empty()) res_.relief = relief_mask_;
+    warnIgnored(first_threshold_, o_.min_measured_share, noise_.correlation_area, &ignored_, &res_.warnings);
+    if (!ignored_.relief.empty()) res_.relief = relief_mask_;
   }
 
  private:
@@ -125,8 +118,8 @@ class PlaqueSearch {
     for (const int k : cores) drawCore(k);
   }
 
-  /** Core k's plaque, if it is one. */
-  void drawCore(int k) {
+  /** Core k's plaque, if it is one; `level` (m): the outline's level instead of the core's own (coreLevels). */
+  void drawCore(int k, double level = kNaN) {
     const cv::Rect bb(stats_.at<int>(k, cv::CC_STAT_LEFT), stats_.at<int>(k, cv::CC_STAT_TOP),
                       stats_.at<int>(k, cv::CC_STAT_WIDTH), stats_.at<int>(k, cv::CC_STAT_HEIGHT));
     if (takenAlready(k, bb)) return;  // part of a plaque drawn already
@@ -134,6 +127,10 @@ class PlaqueSearch {
     double edge = 0, ceiling = 0;
     bool limited = false;
     if (!coreLevels(k, bb, &edge, &ceiling, &limited)) return;
+    if (std::isfinite(level)) {
+      edge = level;
+      limited = false;
+    }
     cv::Rect box;
     cv::Mat mask;
     growRegion(k, bb, edge, ceiling, &box, &mask);
@@ -170,8 +167,10 @@ class PlaqueSearch {
     // Drawn on the smoothed heights, a region must also stand above the noise in its own measured heights: an
     // interior whose mean is below the detection threshold is the smoothed noise's upper tail (or heights filled
     // across a gap), not a plaque the instrument can tell from the skin.
-    if (sums.sh / sums.hk.size() < threshold_) {
-      if (first_scale_) low_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", mean " +
+    // (A region drawn again below the threshold around a bump on raised skin: the bump stands above the threshold, and
+    // the border's profile measured the raised skin around it.)
+    if (sums.sh / sums.hk.size() < threshold_ && !std::isfinite(level)) {
+      if (first_scale_) ignored_.low.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", mean " +
                                      num(std::round(sums.sh / sums.hk.size() * 1e5) / 100) + " mm");
       return;
     }
@@ -183,12 +182,12 @@ class PlaqueSearch {
     // scattered over it fill a few per cent of theirs
     const double fill = ellipseFill(foot.pixels);
     if (fill < kMinEllipseFill) {
-      if (first_scale_) scattered_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+      if (first_scale_) ignored_.scattered.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
                                            num(std::round(100.0 * fill)) + " % of its ellipse");
       return;
     }
     if (sums.nc < o_.min_measured_share * sums.px) {
-      if (first_scale_) sparse_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+      if (first_scale_) ignored_.sparse.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
                                         num(std::round(100.0 * sums.nc / std::max(1, sums.px))) + " % measured");
       return;
     }
@@ -205,7 +204,7 @@ class PlaqueSearch {
       relief_cores_(bb).setTo(255, lab_(bb) == k);
       ++relief_found_;
       if (4 * overlap > sums.px) return;
-      relief_.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", rising " +
+      ignored_.relief.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", rising " +
                                         num(std::round(border.rise * 1e5) / 100) + " mm" +
                                         (border.dip > kMaxInwardDip ? " with two tops"
                                                                     : ", its border " + num(std::round(border.width * 1e4) / 10) +
@@ -213,7 +212,18 @@ class PlaqueSearch {
                                                                           num(std::round(border.limit * 1e4) / 10) + " mm)"));
       return;
     }
-    addPlaque(box, foot, sums, limited, replace, border.width);
+    // a bump on raised skin: it rises above the skin around it by less than the detection threshold and by less than
+    // that skin stands above the reference (a low plaque's top broken up by the noise into pieces above the
+    // threshold): not a plaque of its own, but part of one. Drawn again at half its top's height, below the threshold,
+    // where the profile shows raised skin around it.
+    if (border.base > border.rise && border.rise < threshold_) {
+      if (!std::isfinite(level) && border.base > 3 * border.rise_error) return drawCore(k, 0.5 * (border.base + border.rise));
+      if (first_scale_) ignored_.on_raised.emplace_back(sums.px, std::to_string(sums.px) + " px at " + atPixel(box) + ", " +
+                                           num(std::round(border.rise * 1e5) / 100) + " mm above skin at " +
+                                           num(std::round(border.base * 1e5) / 100) + " mm");
+      return;
+    }
+    addPlaque(box, foot, sums, limited, replace, border);
   }
 
   /** Whether plaque label l (0: none) holds its pixels against the scale being searched: every plaque does at the
@@ -441,7 +451,7 @@ class PlaqueSearch {
   }
 
   /** A region whose surroundings are mostly unknown lies at the edge of the measured surface (or is an island of
-   *  mismatches): its height above the reference means nothing (listed in at_edge_); one higher than max_height
+   *  mismatches): its height above the reference means nothing (listed in ignored_.at_edge); one higher than max_height
    *  is not skin (a warning). True when the region is ignored for either reason. */
   bool atEdgeOrTooHigh(const cv::Rect& box, const cv::Mat& mask, const PlaqueSums& t) {
     const int r1 = 2 * o_.interior_margin_px, r2 = 4 * o_.interior_margin_px;
@@ -469,7 +479,7 @@ class PlaqueSearch {
     const double mean_h = t.sh / static_cast<double>(t.hk.size());
     if (ring_n < 0.25 * ring_all || ring_known < 0.8 * ring_n) {
       // (in pixels: beyond a silhouette the reference's tangent plane is edge-on and an area means nothing)
-      if (first_scale_) at_edge_.emplace_back(t.px, std::to_string(t.px) + " px at " + atPixel(box) + ", " +
+      if (first_scale_) ignored_.at_edge.emplace_back(t.px, std::to_string(t.px) + " px at " + atPixel(box) + ", " +
                                       num(std::round(100.0 * ring_known / std::max(1, ring_n))) + " % of its surroundings known");
       return true;
     }
@@ -521,9 +531,9 @@ class PlaqueSearch {
 
   /** The plaque's figures, its warnings (partly measured, open outline) and its label. */
   void addPlaque(const cv::Rect& box, const Footprint& foot, PlaqueSums& t, bool limited, const std::vector<int>& replace,
-                 double border_width) {
+                 const BorderShape& border) {
     Plaque p;
-    p.border_width = border_width;
+    p.border_width = border.width;
     const double nk = static_cast<double>(t.hk.size());
     p.area = t.area;
     p.centroid = t.c / std::max(1, t.nc);
@@ -561,15 +571,23 @@ class PlaqueSearch {
       offset2 = std::max(0.0, sur.offset * sur.offset - kHalfPi * sur.sigma * sur.sigma * noise_.correlation_area / sur.pixels);
     p.top_height_sigma = std::sqrt(top_sigma * top_sigma + offset2);
     if (!(p.top_height - 3 * p.top_height_sigma > threshold_) && t.px < kMismatchAreas * noise_.correlation_area) {
-      mismatch_.emplace_back(t.px, num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box) + ", top " +
+      ignored_.mismatch.emplace_back(t.px, num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box) + ", top " +
                                        num(std::round(p.top_height * 1e5) / 100) + " +- " +
                                        num(std::round(p.top_height_sigma * 1e5) / 100) + " mm");
       return;
     }
     p.pasi_class = pasiClass(p.top_height, o_.pasi_boundaries);
+    // a low plaque's outline is drawn at the detection threshold, above its half height: its area is the one within
+    // half its rise from the skin around to its top, from its border's profile
+    const bool resolved = border.rise > 3 * border.rise_error;  // the profile tells the half-rise level
+    if (resolved && limited) {
+      const double ratio = border.areaRatioAt(border.base + 0.5 * (p.top_height - border.base));
+      if (std::isfinite(ratio)) p.area = t.area * ratio;
+    }
     p.pixels = t.px;
     p.measured_fraction = t.px > 0 ? t.nc / static_cast<double>(t.px) : 0.0;
-    p.volume = p.measured_fraction > 0 ? t.vol / p.measured_fraction : 0.0;
+    // the volume: the footprint's, and the skirt's outside the outline (a ramp's lower half; 4-6 % of a plaque)
+    p.volume = (p.measured_fraction > 0 ? t.vol / p.measured_fraction : 0.0) + (resolved ? border.skirt_volume : 0.0);
     p.outline_unmeasured = foot.open;
     const std::string what = "a plaque of " + num(std::round(t.area * 1e7) / 10) + " mm^2 at " + atPixel(box);
     std::vector<std::string> warnings;
@@ -622,46 +640,6 @@ class PlaqueSearch {
     res_.labels = final_labels_;
   }
 
-  /** One warning per kind of ignored region (a limb's silhouette can leave dozens), the three largest named. */
-  void warnIgnored() {
-    auto largest = [](std::vector<std::pair<double, std::string>>& v) {
-      std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-      std::string list;
-      for (size_t i = 0; i < std::min<size_t>(3, v.size()); ++i) list += (i ? "; " : "") + v[i].second;
-      return list;
-    };
-    if (!at_edge_.empty()) {
-      const std::string list = largest(at_edge_);
-      res_.warnings.push_back(at_edge_.size() == 1
-                                  ? "a raised region of " + list + " was ignored: it lies at the edge of the measured surface"
-                                  : std::to_string(at_edge_.size()) + " raised regions were ignored: they lie at the edge of the "
-                                    "measured surface (their height above the reference means nothing); the largest: " + list);
-    }
-    auto ignored = [&](std::vector<std::pair<double, std::string>>& v, const std::string& why) {
-      if (!v.empty()) res_.warnings.push_back(std::to_string(v.size()) + " raised region" + (v.size() == 1 ? " was" : "s were") +
-                                " ignored: " + why + "; the largest: " + largest(v));
-    };
-    ignored(low_, "drawn on the smoothed heights, the measured heights inside stand less than the detection threshold (" +
-                      num(std::round(first_threshold_ * 1e5) / 100) + " mm) above the reference on average (the noise, not a plaque)");
-    ignored(scattered_, "scattered pieces fill under " + num(std::round(100 * kMinEllipseFill)) +
-                            " % of the ellipse of their moments (a plaque is one patch of skin)");
-    ignored(mismatch_, "smaller than " + num(kMismatchAreas) + " correlation areas of the height noise (" +
-                           num(std::round(kMismatchAreas * noise_.correlation_area)) + " px) with a top not 3 stated sigma above "
-                           "the detection threshold: one mismatch of the matcher (a window-sized patch settled on a wrong "
-                           "disparity) looks the same (a second view of the skin can tell)");
-    if (!relief_.empty())
-      res_.warnings.push_back(std::to_string(relief_.size()) + " raised region" + (relief_.size() == 1 ? " is" : "s are") +
-                              " not plaque-like: a plaque is sharply demarcated with one top, these rise smoothly (the "
-                              "lower part of their rise, 20 to 50 %, spans more than a plaque's border ramp blurred by the matcher) "
-                              "or have two tops: healthy relief (a fold, a ridge, a nose?) the reference does not follow, "
-                              "not measured as plaques (hatched in the height map; a plaque on such relief cannot be told "
-                              "from it: measure it from a view where the skin around it is smooth); the largest: " +
-                              largest(relief_));
-    ignored(sparse_, "under " + num(std::round(100 * o_.min_measured_share)) +
-                         " % of the footprint has a height (scattered matches, mostly where the skin turns away from the rig, "
-                         "are not a plaque)");
-  }
-
   const Surface& s_;
   const IndurationOptions& o_;
   const cv::Mat band_, reach_;
@@ -680,12 +658,7 @@ class PlaqueSearch {
   std::vector<std::vector<std::string>> plaque_warnings_;  // per plaque: partly measured, open outline
   std::vector<char> tentative_;  // per plaque: drawn at its scale's threshold (a wider scale may replace it)
   std::vector<char> removed_;    // per plaque: replaced by a wider scale's
-  std::vector<std::pair<double, std::string>> at_edge_;  // ignored regions at the edge: area, description
-  std::vector<std::pair<double, std::string>> sparse_;   // ignored regions with too few heights: area, description
-  std::vector<std::pair<double, std::string>> scattered_;  // ignored regions of scattered pieces: area, description
-  std::vector<std::pair<double, std::string>> relief_;    // raised regions shaped like relief: area, description
-  std::vector<std::pair<double, std::string>> low_;      // ignored regions whose interior is not above the threshold
-  std::vector<std::pair<double, std::string>> mismatch_;  // ignored regions no larger or clearer than a mismatch
+  IgnoredRegions ignored_;       // raised regions found not to be plaques, by kind
 };
 
 }  // namespace

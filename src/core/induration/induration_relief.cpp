@@ -31,6 +31,34 @@ Eigen::Matrix2d pixelOnPlane(const cv::Mat& ray, const cv::Rect& box, const Refe
   return J;
 }
 
+namespace {
+
+/** The grid's cells by their signed distance to the outline (the region and the skin around it that may be used,
+ *  known or not; `cls_g` 1 inside, 2 around, 0 neither): out->cells in bins of a quarter of a profile bin (`w` grid
+ *  px, `n_out` of them outside), for the area within a level's crossing (areaRatioAt); returns each outside bin's
+ *  ring. */
+std::vector<double> countCells(const cv::Mat& cls_g, const cv::Mat& din, const cv::Mat& dout, double w, int n_out,
+                               BorderShape* out) {
+  std::vector<double> ring(n_out, 0.0);
+  out->cell_bin = 0.25 * w;
+  out->cells_reach = n_out * w;
+  out->cells.assign(static_cast<std::size_t>(std::ceil(2 * out->cells_reach / out->cell_bin)) + 1, 0.0);
+  for (int y = 0; y < cls_g.rows; ++y)
+    for (int x = 0; x < cls_g.cols; ++x) {
+      const uchar c = cls_g.at<uchar>(y, x);
+      if (c == 0) continue;
+      const bool in = c == 1;
+      const double d = in ? din.at<float>(y, x) - 0.5 : 0.5 - dout.at<float>(y, x);
+      const int i = static_cast<int>(std::floor(d / w)) + n_out;
+      if (!in && i >= 0 && i < n_out) ring[i] += 1;
+      const long k = static_cast<long>(std::floor((d + out->cells_reach) / out->cell_bin));
+      out->cells[static_cast<std::size_t>(std::clamp(k, 0L, static_cast<long>(out->cells.size()) - 1))] += 1;
+    }
+  return ring;
+}
+
+}  // namespace
+
 BorderShape borderShape(const cv::Mat& cls, const cv::Mat& hw, const Eigen::Matrix2d& J, const HeightNoise& noise,
                         double threshold) {
   BorderShape out;
@@ -115,7 +143,8 @@ BorderShape borderShape(const cv::Mat& cls, const cv::Mat& hw, const Eigen::Matr
     if (std::isfinite(e)) errs.push_back(e);
   if (errs.empty()) return out;
   std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
-  out.clear = out.rise > kBorderClear * errs[errs.size() / 2] && std::isfinite(noise.sigma);
+  out.rise_error = errs[errs.size() / 2];
+  out.clear = out.rise > kBorderClear * out.rise_error && std::isfinite(noise.sigma);
   // the crossings, scanning inward (interpolated between bin centres)
   auto crossing = [&](double f) -> double {
     const double level = base + f * out.rise;
@@ -131,6 +160,21 @@ BorderShape borderShape(const cv::Mat& cls, const cv::Mat& hw, const Eigen::Matr
     return kNaN;
   };
   const double d20 = crossing(0.2), d50 = crossing(0.5);
+  const std::vector<double> ring = countCells(cls_g, din, dout, w, n_out, &out);
+  out.base = base;
+  for (int i = 0; i <= top_i; ++i)
+    if (std::isfinite(run[i])) out.profile.emplace_back((i - n_out + 0.5) * w, run[i]);
+  // the skirt: outward from the outline while the rise stands 2 errors above the skin around (a bin's own median
+  // where it has one), and no further than three times the border's width (20 -> 50 % of the rise) beyond its half
+  // height: a ramp blurred by the matcher has 0.1 % of its rise left there, a linear ramp none (the skin around
+  // the plaque standing off the reference, relief or the band's edge would otherwise add ring after ring)
+  const double skirt_end = std::isfinite(d20) && std::isfinite(d50) ? d50 - 3 * (d50 - d20) : 0.0;
+  for (int i = n_out - 1; i >= 0; --i) {
+    if ((i - n_out + 0.5) * w < skirt_end) break;
+    if (!std::isfinite(run[i]) || run[i] - base <= 2 * run_err[i]) break;
+    const double v = std::isfinite(med[i]) ? med[i] : run[i];
+    out.skirt_volume += std::max(0.0, v - base) * ring[i] * pixel_m * pixel_m;
+  }
   // how far out the region's skirt stands above the detection threshold (all the profile's outside if it does)
   const double d_thr = out.rise > threshold ? crossing(threshold / out.rise) : 0.0;
   out.reach = (std::isfinite(d_thr) ? std::max(0.0, -d_thr) : dmax) * pixel_m;
@@ -151,6 +195,30 @@ BorderShape borderShape(const cv::Mat& cls, const cv::Mat& hw, const Eigen::Matr
   const bool significant = run[top_i] - low > 3 * std::hypot(low_err, run_err[top_i]);
   out.dip = out.rise > 0 && significant ? (run[top_i] - low) / out.rise : 0;
   return out;
+}
+
+double BorderShape::areaRatioAt(double level) const {
+  // the first crossing scanning inward, interpolated between bin centres
+  double d = kNaN;
+  for (std::size_t i = 0; i < profile.size(); ++i)
+    if (profile[i].second >= level) {
+      d = i == 0 ? profile[i].first
+                 : profile[i - 1].first + (profile[i].first - profile[i - 1].first) * (level - profile[i - 1].second) /
+                                              (profile[i].second - profile[i - 1].second);
+      break;
+    }
+  if (!std::isfinite(d) || cells.empty()) return kNaN;
+  // cells at or beyond d (the bin holding d by its share) over those inside the outline (d >= 0)
+  auto within = [&](double from) {
+    const double x = (from + cells_reach) / cell_bin;
+    const long c = static_cast<long>(std::floor(x));
+    double n = 0;
+    for (long k = std::max(0L, c + 1); k < static_cast<long>(cells.size()); ++k) n += cells[static_cast<std::size_t>(k)];
+    if (c >= 0 && c < static_cast<long>(cells.size())) n += (c + 1 - x) * cells[static_cast<std::size_t>(c)];
+    return n;
+  };
+  const double at_outline = within(0.0);
+  return at_outline > 0 ? within(d) / at_outline : kNaN;
 }
 
 }  // namespace induration_detail

@@ -188,8 +188,9 @@ Eigen::Matrix2d pixelOnPlane(const cv::Mat& ray, const cv::Rect& box, const Refe
  *  skin around) and the highest of the inside bins (3-bin running means); the crossings of 20 and 50 % of the rise
  *  are the first, scanning inward. The skirt: the bins outside the outline, scanning outward until the rise falls
  *  within 2 errors or 3 border widths beyond the half-rise crossing, each bin's rise over the skin around times its
- *  ring's area (every grid cell at that distance on the skin around that may be used, measured or not). `noise`: the healthy skin's height noise (the bins' errors, the blur);
- *  `threshold`: the detection threshold (m; the skirt's reach). */
+ *  ring's area (every grid cell at that distance on the skin around that may be used, measured or not). `noise`:
+ *  the healthy skin's height noise (the bins' errors, the blur); `threshold`: the detection threshold (m; the
+ *  skirt's reach). */
 BorderShape borderShape(const cv::Mat& cls, const cv::Mat& heights, const Eigen::Matrix2d& J, const HeightNoise& noise,
                         double threshold);
 

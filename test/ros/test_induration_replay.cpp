@@ -317,7 +317,7 @@ TEST(IndurationReplay, BadInputKeepsRunning) {
   }
   // Still alive: the manager answers the service.
   skin3d::SaveResults srv;
-  srv.request.directory = "/tmp/skin3d_induration_rostest_alive";
+  srv.request.directory = ::testing::TempDir() + "skin3d_induration_rostest_alive";  // $TEST_TMPDIR/ or /tmp/
   EXPECT_TRUE(ros::service::call("induration/save_results", srv));
   EXPECT_TRUE(srv.response.success) << srv.response.message;
 }

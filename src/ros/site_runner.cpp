@@ -27,6 +27,12 @@ namespace ros_run {
 
 namespace {
 
+std::string num1(double v) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.1f", v);
+  return b;
+}
+
 Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& p) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z)
@@ -281,6 +287,7 @@ bool SiteRunner::saveLocked(const std::string& dir, std::string* message, const 
     return false;
   }
   try {
+    const site::SitePoseGraph& graph = fusion_.refine();  // the whole sweep's poses jointly, then the site again
     const site::SiteResult r = fusion_.measure();
     const std::string src = source.empty() ? "stereo/{left,right}/image_raw with poses from " +
                                                  (run_.poses == "tf" ? "TF (" + run_.world_frame + ")" : run_.poses)
@@ -290,7 +297,11 @@ bool SiteRunner::saveLocked(const std::string& dir, std::string* message, const 
     if (dir == results_) unsaved_ = false;
     *message = "site of " + std::to_string(r.frames_fused) + " fused frames (" + std::to_string(r.frames_left_out) +
                " left out, " + std::to_string(r.plaques.size()) + " plaques) written to " + dir +
-               (waiting_.empty() ? "" : "; " + std::to_string(waiting_.size()) + " measured pairs still wait for their pose");
+               (waiting_.empty() ? "" : "; " + std::to_string(waiting_.size()) + " measured pairs still wait for their pose") +
+               (graph.run ? "; pose graph over " + std::to_string(graph.frames) + " pairs: block differences " +
+                                num1(graph.rms_before * 1e6) + " -> " + num1(graph.rms_after * 1e6) + " um RMS" +
+                                (graph.used ? "" : " (not used: " + graph.message + ")")
+                          : "");
     if (result) *result = r;
     return true;
   } catch (const std::exception& e) {

@@ -289,6 +289,7 @@ TEST(SiteOptions, ConfigFileListsExactlyTheKeysWithTheCodeDefaults) {
   from_file.min_overlap = 0.5;
   from_file.max_correction = 1e-3;
   from_file.seam_block = 4e-3;
+  from_file.pose_graph = !site::SiteOptions().pose_graph;
   const site::SiteOptions defaults;
   for (const auto& k : site::siteOptionKeys())
     ASSERT_NE(site::getSiteOption(from_file, k), site::getSiteOption(defaults, k)) << "the test must change " << k;

@@ -41,6 +41,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,7 @@ namespace site {
 
 namespace site_detail {
 struct FusionGrid;
+struct KeptFrame;
 }
 
 struct SiteOptions {
@@ -65,6 +67,10 @@ struct SiteOptions {
    *  not trusted (left out, named): a registration that slid along the body is worse than the pose it started from. */
   double max_correction = 5e-3;
   double seam_block = 2e-3;        //!< m, block size of the seam measure (wider than the matcher window's correlation)
+  /** refine every fused frame's pose jointly against all the frames it overlaps (a pose graph over the seam blocks,
+   *  Ceres) and fuse the site again from the refined poses, before it is measured. Off by default: after the
+   *  registration it changed no plaque on the rendered sweeps and let the poses slide along the limb (docs/site.md) */
+  bool pose_graph = false;
   void validate() const;           //!< throws std::invalid_argument naming the option
 };
 
@@ -131,6 +137,17 @@ struct SitePlaque {
   int frames_within_45 = 0;        //!< frames that saw its centroid within 45 deg in both cameras
 };
 
+/** @brief What the pose graph did (SiteOptions::pose_graph): frames' offsets from the fused surface over seam blocks,
+ *  compared pair by pair wherever two frames share a block. */
+struct SitePoseGraph {
+  bool run = false, used = false, converged = false;
+  int frames = 0, pairs = 0, iterations = 0, passes = 0;  //!< passes: summaries, solve and fusion again
+  long blocks = 0;                 //!< block comparisons (residuals)
+  double rms_before = 0, rms_after = 0;  //!< m, RMS of the pairs' block differences before the first pass, after the last
+  double seconds = 0;              //!< s, summaries, solve and the fusion again
+  std::string message;             //!< the solver's
+};
+
 struct SiteResult {
   SiteSurface surface;
   double cell = 0;                 //!< m
@@ -143,6 +160,7 @@ struct SiteResult {
   int frames_fused = 0, frames_left_out = 0;
   double seam_rms = 0;             //!< m, RMS over the fused frames' seam blocks
   double seam_noise = 0, seam_excess = 0, seam_rigid = 0;  //!< m, as SiteFrame's, over all the blocks
+  SitePoseGraph pose_graph;
   double seconds_measure = 0;      //!< s, the site measurement
   /** The unrolled maps (rows v, columns u, the crop of the fused cells): heights above the body model (m, NaN
    *  unknown), their sigma (m), frames that contributed, plaque labels; u0, v0 the coordinates of cell (0, 0)'s centre. */
@@ -188,6 +206,10 @@ class SiteFusion {
   void skip(double stamp, const std::string& reason);
   const std::vector<SiteFrame>& frames() const { return frames_; }
   bool empty() const;
+  /** @brief The pose graph (SiteOptions::pose_graph): refines the fused frames' poses jointly and fuses the site
+   *  again from them (their seams then say how they agree); the frames' records get the refined poses. Called
+   *  before measuring a whole sweep; a no-op with the option off or fewer than two frames fused. */
+  const SitePoseGraph& refine();
   /** @brief Measures the site fused so far (may be called at any time). */
   SiteResult measure() const;
   /** @brief The site fused so far on at most about `max_cells` preview cells (SitePreview); empty before the
@@ -199,6 +221,9 @@ class SiteFusion {
   induration::IndurationOptions induration_;
   std::vector<SiteFrame> frames_;
   site_detail::FusionGrid* grid_ = nullptr;
+  std::vector<std::unique_ptr<site_detail::KeptFrame>> kept_;  //!< the fused frames' samples (for the pose graph)
+  void refuse(const std::vector<Eigen::Isometry3d>& poses);    //!< the kept frames fused again from these poses
+  SitePoseGraph graph_;
 };
 
 /** @brief Residual of a world point X against the fused surface's tangent plane (P, n): n . (X - P), and its

@@ -14,7 +14,8 @@ namespace site {
 const std::vector<std::string>& siteOptionKeys() {
   static const std::vector<std::string> keys = {"site_cell_mm",          "site_max_incidence_deg", "site_register",
                                                 "site_register_stride",  "site_register_iterations",
-                                                "site_min_overlap",      "site_max_correction_mm", "site_seam_block_mm"};
+                                                "site_min_overlap",      "site_max_correction_mm", "site_seam_block_mm",
+                                                "site_pose_graph"};
   return keys;
 }
 
@@ -30,6 +31,10 @@ void setSiteOption(SiteOptions* o, const std::string& k, const std::string& v) {
   else if (k == "site_min_overlap") o->min_overlap = num(0);
   else if (k == "site_max_correction_mm") o->max_correction = num(0) * 1e-3;
   else if (k == "site_seam_block_mm") o->seam_block = num(0) * 1e-3;
+  else if (k == "site_pose_graph") {
+    if (v != "true" && v != "false") throw std::invalid_argument("site_pose_graph must be true or false (got '" + v + "')");
+    o->pose_graph = v == "true";
+  }
   else {
     std::string known;
     for (const auto& key : siteOptionKeys()) known += (known.empty() ? "" : ", ") + key;
@@ -48,6 +53,7 @@ std::string getSiteOption(const SiteOptions& o, const std::string& k) {
   else if (k == "site_min_overlap") s << o.min_overlap;
   else if (k == "site_max_correction_mm") s << o.max_correction * 1e3;
   else if (k == "site_seam_block_mm") s << o.seam_block * 1e3;
+  else if (k == "site_pose_graph") s << (o.pose_graph ? "true" : "false");
   else throw std::invalid_argument("unknown site option '" + k + "'");
   return s.str();
 }

@@ -43,6 +43,17 @@ struct FusionGrid {
     if (periodic) *j = ((*j % nv) + nv) % nv;
     return *i >= 0 && *i < nu && *j >= 0 && *j < nv;
   }
+  /** The fused surface's tangent plane under the point uvw (its fused value val, slopes su, sv from lookup): its
+   *  outward normal in world, and the surface point *P. */
+  Eigen::Vector3d tangentPlane(const Eigen::Vector3d& uvw, double val, double su, double sv, Eigen::Vector3d* P) const {
+    const Eigen::Vector3d base(uvw.x(), uvw.y(), wref + val);
+    const Eigen::Vector3d out = surf.outward(base);
+    *P = surf.toWorld(base);
+    Eigen::Vector3d tu, tv;
+    surf.tangents(base, &tu, &tv);
+    Eigen::Vector3d n = (tu + su * out).cross(tv + sv * out).normalized();
+    return n.dot(out) < 0 ? Eigen::Vector3d(-n) : n;
+  }
   /** fused w - wref at (u, v) (nearest cell), its sigma and slopes; false where nothing is fused */
   bool lookup(double u, double v, double* val, double* sigma, double* su, double* sv) const {
     int i, j;
@@ -104,6 +115,41 @@ struct View {
  *  body's normal there. */
 double incidenceCos(const FusionGrid& g, const View& v, const Eigen::Isometry3d& T, const Eigen::Vector3d& Xc,
                     Eigen::Vector3d* Xw, Eigen::Vector3d* uvw);
+
+/** Compares a frame with the fused surface (its seams) and fuses it (site_fusion.cpp; `own`: its height noise and
+ *  correlation area); returns the samples fused and how many fell on skin fused before. */
+long fuseFrame(FusionGrid& g, const View& view, const std::vector<Sample>& samples, const induration::IndurationResult& own,
+               const SiteOptions& o, SiteFrame* F, long* on_old_out);
+
+/** A fused frame as the pose graph needs it again: its samples, cameras, noise, and its record's index. */
+struct KeptFrame {
+  int index = 0;
+  std::vector<Sample> samples;
+  View view;
+  double height_noise = 0, noise_correlation_px2 = 1;
+};
+
+/** One frame's samples over one seam block, as a function of the frame's pose T = (R, t): their weighted mean
+ *  offset from the fused surface's tangent planes is trace(R M) + n . t - c (M = mean of X n^T, X in the camera
+ *  frame; n the mean normal; c the mean n . P), exact for fixed tangent planes. var: the mean's variance. */
+struct BlockSummary {
+  long block = 0;
+  Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  double c = 0, var = 0;
+};
+/** The summaries of a frame's samples (every `stride`-th) at pose T over blocks of `block` m (blocks with half
+ *  their share of samples); noise2, corr: the frame's height noise (m^2) and its correlation area (px^2). */
+std::vector<BlockSummary> blockSummaries(const FusionGrid& g, const View& view, const std::vector<Sample>& samples,
+                                         const Eigen::Isometry3d& T, double block, int stride, double noise2, double corr);
+/** A summary's offset at pose T (the cost's own function, for tests). */
+double blockOffset(const BlockSummary& s, const Eigen::Isometry3d& T);
+/** The pose graph over the frames' summaries (site_graph.cpp): every block two frames share is a residual, their
+ *  offsets' difference over its sigma (Huber at 2 sigma), plus a weak prior on each pose as `given` (5 mrad, 1 mm);
+ *  frame `fixed` holds the gauge. Poses are replaced
+ *  when the solution is usable. */
+SitePoseGraph solvePoseGraph(const std::vector<std::vector<BlockSummary>>& blocks, int fixed, const std::vector<Eigen::Isometry3d>& given,
+                             std::vector<Eigen::Isometry3d>* poses, int max_iterations = 30);
 
 /** Aligns a frame to the fused surface from its given pose (site_fusion.h, 2.; site_register.cpp): sets F->pose,
  *  overlap, correction_rms, registration_iterations; false (F->reason says why) when it must be left out. */

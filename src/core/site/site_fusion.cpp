@@ -443,7 +443,7 @@ const SiteFrame& SiteFusion::add(const geometry::DenseCloud& cloud, const indura
   }
   site_detail::FusionGrid& g = *grid_;
 
-  const std::vector<site_detail::Sample> samples = site_detail::skinSamples(cloud, own, static_cast<float>(induration_.max_height));
+  std::vector<site_detail::Sample> samples = site_detail::skinSamples(cloud, own, static_cast<float>(induration_.max_height));
   if (samples.size() < 100) {
     F.reason = "only " + std::to_string(samples.size()) + " points were matched";
     return F;
@@ -469,6 +469,15 @@ const SiteFrame& SiteFusion::add(const geometry::DenseCloud& cloud, const indura
   }
   F.fused = true;
   F.reason.clear();
+  if (options_.pose_graph) {
+    auto k = std::make_unique<site_detail::KeptFrame>();
+    k->index = F.index;
+    k->samples = std::move(samples);  // not used here again
+    k->view = view;
+    k->height_noise = own.height_noise;
+    k->noise_correlation_px2 = own.noise_correlation_px2;
+    kept_.push_back(std::move(k));
+  }
   return F;
 }
 
@@ -583,6 +592,7 @@ SiteResult SiteFusion::measure() const {
   r.seam_rms = nb > 0 ? std::sqrt(s2 / nb) : kNaN;
   r.seam_noise = nb > 0 ? std::sqrt(n2 / nb) : kNaN;
   r.seam_excess = nb > 0 ? std::sqrt(std::max(0.0, s2 - n2) / nb) : kNaN;
+  r.pose_graph = graph_;
   r.seconds_measure = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return r;
 }

@@ -106,6 +106,22 @@ void writeSiteResults(const std::string& dir, const SiteResult& r, const std::ve
   y << YAML::Key << "rigid_um" << YAML::Value;
   num(y, r.seam_rigid * 1e6);
   y << YAML::EndMap;
+  {
+    const SitePoseGraph& g = r.pose_graph;
+    y << YAML::Key << "pose_graph" << YAML::Value << YAML::BeginMap << YAML::Key << "run" << YAML::Value << g.run;
+    if (g.run) {
+      y << YAML::Key << "used" << YAML::Value << g.used << YAML::Key << "frames" << YAML::Value << g.frames;
+      y << YAML::Key << "pairs" << YAML::Value << g.pairs << YAML::Key << "block_comparisons" << YAML::Value << g.blocks;
+      y << YAML::Key << "rms_before_um" << YAML::Value;
+      num(y, g.rms_before * 1e6);
+      y << YAML::Key << "rms_after_um" << YAML::Value;
+      num(y, g.rms_after * 1e6);
+      y << YAML::Key << "passes" << YAML::Value << g.passes << YAML::Key << "iterations" << YAML::Value << g.iterations;
+      y << YAML::Key << "converged" << YAML::Value << g.converged;
+      y << YAML::Key << "seconds" << YAML::Value << g.seconds << YAML::Key << "solver" << YAML::Value << g.message;
+    }
+    y << YAML::EndMap;
+  }
   y << YAML::Key << "seconds_measure" << YAML::Value << r.seconds_measure;
   y << YAML::Key << "frames_fused" << YAML::Value << r.frames_fused;
   y << YAML::Key << "frames_left_out" << YAML::Value << r.frames_left_out;

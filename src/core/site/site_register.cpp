@@ -29,12 +29,8 @@ int residuals(const FusionGrid& g, const View& view, const std::vector<Sample>& 
     if (incidenceCos(g, view, T, samples[k].X, &Xw, &uvw) < view.cos_max) continue;
     double val, sig, su, sv;
     if (!g.lookup(uvw.x(), uvw.y(), &val, &sig, &su, &sv)) continue;
-    const Eigen::Vector3d base(uvw.x(), uvw.y(), g.wref + val);
-    const Eigen::Vector3d P = g.surf.toWorld(base), out = g.surf.outward(base);
-    Eigen::Vector3d tu, tv;
-    g.surf.tangents(base, &tu, &tv);
-    Eigen::Vector3d n = (tu + su * out).cross(tv + sv * out).normalized();
-    if (n.dot(out) < 0) n = -n;
+    Eigen::Vector3d P;
+    const Eigen::Vector3d n = g.tangentPlane(uvw, val, su, sv, &P);
     Eigen::Matrix<double, 1, 6> Jk;
     r->push_back(pointToPlane(Xw - c, P - c, n, J ? &Jk : nullptr));
     w->push_back(1.0 / (static_cast<double>(samples[k].sigma) * samples[k].sigma + sig * sig));

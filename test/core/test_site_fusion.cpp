@@ -13,6 +13,7 @@
 #include "skin3d/induration/induration.h"
 #include "skin3d/sim/skin.h"
 #include "skin3d/site/site_fusion.h"
+#include "site_test_scene.h"
 
 using namespace skin3d;  // NOLINT(build/namespaces)
 
@@ -44,31 +45,7 @@ struct Orbit {
     return T;
   }
   geometry::DenseCloud cloud(const Eigen::Isometry3d& T_W_C, std::uint64_t seed) const {
-    geometry::DenseCloud c;
-    c.xyz.create(height, width, CV_32FC3);
-    c.sigma.create(height, width, CV_32F);
-    c.ray.create(height, width, CV_32FC3);
-    c.right_centre = cv::Vec3d(baseline, 0, 0);
-    std::mt19937_64 rng(seed);
-    std::normal_distribution<double> n01(0, 1);
-    sim::Hit hit;
-    for (int v = 0; v < height; ++v)
-      for (int u = 0; u < width; ++u) {
-        const Eigen::Vector3d ray = Eigen::Vector3d((u - 0.5 * width) / f, (v - 0.5 * height) / f, 1).normalized();
-        c.ray.at<cv::Vec3f>(v, u) = cv::Vec3f(ray.x(), ray.y(), ray.z());
-        const bool ok = scene.intersect(T_W_C.translation(), T_W_C.linear() * ray, &hit);
-        const double cl = ok ? -hit.normal.dot(T_W_C.linear() * ray) : 0;
-        if (!ok || cl < std::cos(75 * kDeg)) {
-          c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(NAN, NAN, NAN);
-          c.sigma.at<float>(v, u) = NAN;
-          continue;
-        }
-        const double t = hit.distance + noise * n01(rng);
-        const Eigen::Vector3d X = t * ray;
-        c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(X.x(), X.y(), X.z());
-        c.sigma.at<float>(v, u) = static_cast<float>(noise);
-      }
-    return c;
+    return site_test::castCloud(scene, T_W_C, width, height, f, baseline, noise, seed);
   }
 };
 

@@ -13,6 +13,7 @@
 #include "skin3d/induration/induration.h"
 #include "skin3d/sim/skin.h"
 #include "skin3d/site/site_fusion.h"
+#include "site_test_scene.h"
 
 namespace skin3d {
 namespace site {
@@ -166,29 +167,7 @@ TEST(SitePoseGraph, MisplacedFramesAreBroughtOntoTheSkinTheOthersSaw) {
     return T;
   };
   auto cloud = [&](const Eigen::Isometry3d& T, std::uint64_t seed) {
-    geometry::DenseCloud c;
-    c.xyz.create(height, width, CV_32FC3);
-    c.sigma.create(height, width, CV_32F);
-    c.ray.create(height, width, CV_32FC3);
-    c.right_centre = cv::Vec3d(0.1, 0, 0);
-    std::mt19937_64 r(seed);
-    std::normal_distribution<double> n01(0, 1);
-    sim::Hit hit;
-    for (int v = 0; v < height; ++v)
-      for (int u = 0; u < width; ++u) {
-        const Eigen::Vector3d ray = Eigen::Vector3d((u - 0.5 * width) / f, (v - 0.5 * height) / f, 1).normalized();
-        c.ray.at<cv::Vec3f>(v, u) = cv::Vec3f(ray.x(), ray.y(), ray.z());
-        const bool ok = scene.intersect(T.translation(), T.linear() * ray, &hit);
-        if (!ok || -hit.normal.dot(T.linear() * ray) < std::cos(75 * kDeg)) {
-          c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(NAN, NAN, NAN);
-          c.sigma.at<float>(v, u) = NAN;
-          continue;
-        }
-        const Eigen::Vector3d X = (hit.distance + noise * n01(r)) * ray;
-        c.xyz.at<cv::Vec3f>(v, u) = cv::Vec3f(X.x(), X.y(), X.z());
-        c.sigma.at<float>(v, u) = static_cast<float>(noise);
-      }
-    return c;
+    return site_test::castCloud(scene, T, width, height, f, 0.1, noise, seed);
   };
   induration::IndurationOptions io;
   site::SiteOptions so;

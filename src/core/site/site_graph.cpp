@@ -179,15 +179,15 @@ SitePoseGraph solvePoseGraph(const std::vector<std::vector<BlockSummary>>& block
     std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
     scale = std::max(1.0, 1.4826 * z[z.size() / 2]);
   }
-  ceres::HuberLoss* loss = new ceres::HuberLoss(2.0 * scale);
-  for (const Edge& e : edges)
-    problem.AddResidualBlock(blockPairCost(blocks[e.i][e.ki], blocks[e.j][e.kj]), loss, q[e.i].coeffs().data(), t[e.i].data(),
-                             q[e.j].coeffs().data(), t[e.j].data());
   rep.pairs = static_cast<int>(pairs.size());
-  if (rep.blocks == 0) {
+  if (edges.empty()) {
     rep.message = "no two frames share a block: nothing to refine";
     return rep;
   }
+  ceres::HuberLoss* loss = new ceres::HuberLoss(2.0 * scale);  // the problem owns it (once, however many blocks share it)
+  for (const Edge& e : edges)
+    problem.AddResidualBlock(blockPairCost(blocks[e.i][e.ki], blocks[e.j][e.kj]), loss, q[e.i].coeffs().data(), t[e.i].data(),
+                             q[e.j].coeffs().data(), t[e.j].data());
   for (int i = 0; i < n; ++i) {
     if (!problem.HasParameterBlock(q[i].coeffs().data())) continue;
     problem.SetManifold(q[i].coeffs().data(), &quaternion);

@@ -6,6 +6,7 @@
 #include <skin3d/SaveResults.h>
 #include <std_srvs/Empty.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -114,6 +115,9 @@ void SlamRunner::onImu(const sensor_msgs::Imu& imu) {
     ledger_.drop("imu/data", t, e.what());
     return;
   }
+  if (slam_->options().smoother != "off")
+    smoother_gyro_.push_back({t, Eigen::Vector3d(imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z),
+                              ros_conv::gyroCovariance(imu)});
   last_gyro_ = std::max(last_gyro_, t);
   drainLocked(false);
 }
@@ -166,7 +170,18 @@ void SlamRunner::processLocked(const skin3d::LandmarkArray& msg) {
   const auto t0 = std::chrono::steady_clock::now();
   slam::FrameStats st;
   try {
-    st = slam_->processFrame(t, ros_conv::fromMsg(msg));
+    const std::vector<slam::Measurement> meas = ros_conv::fromMsg(msg);
+    st = slam_->processFrame(t, meas);
+    if (slam_->options().smoother != "off") {
+      const auto& ids = slam_->lastAssociations();
+      slam::SmootherFrame f;
+      f.t = t;
+      f.p = slam_->filter().state().p;
+      f.q = slam_->filter().state().q;
+      for (std::size_t i = 0; i < meas.size() && i < ids.size(); ++i)
+        if (ids[i] >= 0) f.observations.push_back({ids[i], meas[i].z, meas[i].C});
+      smoother_frames_.push_back(std::move(f));
+    }
   } catch (const std::exception& e) {
     ledger_.drop("stereo/landmarks", t, e.what());
     return;
@@ -219,6 +234,8 @@ void SlamRunner::resetLocked() {
   }
   slam_->reset();
   run_ = slam::RunRecord();
+  smoother_frames_.clear();
+  smoother_gyro_.clear();
   truth_.clear();
   waiting_.clear();
   last_frame_ = -1e300;
@@ -239,6 +256,62 @@ bool SlamRunner::save(const std::string& dir, std::string* message,
                       const std::vector<std::string>& command_line, const InputLedger* upstream) {
   std::lock_guard<std::mutex> lock(mutex_);
   return saveLocked(dir, message, extra, command_line, upstream);
+}
+
+void SlamRunner::smoothInto(slam::RunRecord* run) {
+  smoothed_ = false;
+  const slam::SlamOptions& o = slam_->options();
+  if (o.smoother == "off") return;
+  run->info.push_back({"trajectory", "filter (the smoother did not run)"});
+  const std::size_t line = run->info.size() - 1;
+  if (smoother_frames_.size() != run->trajectory.size()) {
+    run->info.push_back({"smoother", "not run: its frames do not match the trajectory's"});
+    return;
+  }
+  slam::SmootherOptions so;
+  so.huber = o.smoother_huber;
+  so.max_iterations = o.smoother_iterations;
+  so.gyro_noise = o.gyro_noise;
+  so.gyro_bias_walk = o.filter.gyro_bias_walk;
+  so.initial_gyro_bias_std = o.filter.initial_gyro_bias_std;
+  so.initial_gyro_bias = o.filter.initial_gyro_bias;
+  so.velocity_noise = o.filter.velocity_noise;
+  so.estimate_gyro_bias = o.filter.estimate_gyro_bias;
+  so.threads = o.filter.threads;
+  const std::vector<slam::GyroSample> none;
+  const slam::SmootherResult r = slam::smooth(smoother_frames_, o.use_gyro ? smoother_gyro_ : none, so);
+  log_.info("smoother: " + r.message);
+  if (!r.ok) {
+    run->info.push_back({"smoother", "failed: " + r.message});
+    return;
+  }
+  if (!run->ground_truth.empty()) {
+    try {
+      const slam::TrajectoryError e = slam::trajectoryError(run->trajectory, run->ground_truth, slam::AteAlignment::SE3, run->ate_max_dt);
+      run->info.push_back({"filter_ate_se3_rmse_mm", std::to_string(1e3 * e.rmse)});
+    } catch (const std::exception&) {
+    }
+  }
+  for (std::size_t k = 0; k < run->trajectory.size(); ++k) {
+    run->trajectory[k].p = r.p[k];
+    run->trajectory[k].q = r.q[k];
+  }
+  run->info[line] = {"trajectory", "smoother (batch; the filter's: trajectory_filter.tum)"};
+  // the map: the smoothed positions of the landmarks the smoother had (the others as the filter left them)
+  for (auto& mp : run->map) {
+    auto it = std::lower_bound(r.landmark_positions.begin(), r.landmark_positions.end(), mp.id,
+                               [](const std::pair<std::int64_t, Eigen::Vector3d>& a, std::int64_t id) { return a.first < id; });
+    if (it != r.landmark_positions.end() && it->first == mp.id) mp.position = it->second;
+  }
+  run->info.push_back({"smoother", r.message});
+  run->info.push_back({"smoother_seconds", std::to_string(r.seconds)});
+  if (o.use_gyro && !r.gyro_bias.empty()) {
+    const Eigen::Vector3d b = r.gyro_bias.back();
+    const Eigen::Vector3d sd = r.final_bias_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+    run->info.push_back({"smoother_final_gyro_bias_rad_s", "[" + std::to_string(b.x()) + ", " + std::to_string(b.y()) + ", " + std::to_string(b.z()) + "]"});
+    run->info.push_back({"smoother_final_gyro_bias_std_rad_s", "[" + std::to_string(sd.x()) + ", " + std::to_string(sd.y()) + ", " + std::to_string(sd.z()) + "]"});
+  }
+  smoothed_ = true;
 }
 
 bool SlamRunner::saveLocked(const std::string& dir, std::string* message,
@@ -264,7 +337,11 @@ bool SlamRunner::saveLocked(const std::string& dir, std::string* message,
                  {"camera_frame", par_.camera_frame},
                  {"slam_ms_per_frame", std::to_string(1e3 * slam_seconds_ / n)}};
     for (const auto& kv : extra) run_.info.push_back(kv);
-    const std::string text = slam::writeResults(dir, run_);
+    slam::RunRecord written = run_;
+    smoothInto(&written);
+    const std::string text = slam::writeResults(dir, written);
+    if (smoothed_)
+      slam::writeTum(dir + "/trajectory_filter.tum", run_.trajectory);
     const slam::SlamOptions& o = slam_->options();
     common::writeParameters(dir + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml",
                             command_line.empty() ? std::vector<std::string>{node_name_} : command_line,

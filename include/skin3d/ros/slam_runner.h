@@ -30,6 +30,7 @@
 #include "skin3d/ros/slam_messages.h"
 #include "skin3d/slam/results.h"
 #include "skin3d/slam/slam_system.h"
+#include "skin3d/slam/smoother.h"
 
 namespace diagnostic_updater {
 class Updater;
@@ -102,6 +103,8 @@ class SlamRunner {
                   const std::vector<std::pair<std::string, std::string>>& extra,
                   const std::vector<std::string>& command_line, const InputLedger* upstream);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /** With options.smoother: the smoother's trajectory into `run` (its summary lines too). */
+  void smoothInto(slam::RunRecord* run);
 
   mutable std::mutex mutex_;
   RunLog log_;
@@ -120,6 +123,9 @@ class SlamRunner {
   ros_conv::StampOrder imu_order_;                       // imu/data stamps must increase
   double last_frame_ = -1e300;                           // stamp of the newest frame taken
   bool unsaved_ = false;
+  std::vector<slam::SmootherFrame> smoother_frames_;     // what the smoother needs (options.smoother only)
+  std::vector<slam::GyroSample> smoother_gyro_;
+  bool smoothed_ = false;
   double slam_seconds_ = 0.0;
   std::string node_name_ = "eskf_slam";
 

@@ -67,6 +67,12 @@ struct SlamOptions {
    *  a new landmark is placed with the whole C. The rest of the error, correlated over frames, belongs to
    *  filter.landmark_walk. Default 1 (all white: the landmark-level simulations). */
   double measurement_white_fraction = 1.0;
+  /** Back end run over the whole recording when the results are written (SlamRunner::save): "batch" smooths
+   *  every frame's pose, the landmarks and the gyro bias together (smoother.h) and trajectory.tum is its
+   *  trajectory (the filter's is kept as trajectory_filter.tum); "off" = the filter's. */
+  std::string smoother = "off";
+  double smoother_huber = 2.80;     //!< Huber radius of a landmark residual, in sigmas (chi^2 3 dof 95 %)
+  int smoother_iterations = 50;     //!< Levenberg-Marquardt iterations at most
   /** @throws std::invalid_argument naming the bad field (also validates filter and pool options). */
   void validate() const;
 };
@@ -130,6 +136,11 @@ class SlamSystem {
    */
   FrameStats processFrame(double time, const std::vector<Measurement>& measurements);
 
+  /** @brief The last processFrame()'s landmark id (LandmarkPool ids, never reused) for each of its input
+   *  measurements, in input order: the landmark it was associated with or initialised as, -1 for neither
+   *  (dropped, rejected or not used; all -1 with a known map). What a smoother needs to tie frames together. */
+  const std::vector<std::int64_t>& lastAssociations() const { return last_ids_; }
+
   bool initialised() const { return initialised_; }
   double time() const { return time_; }
   const Eskf& filter() const { return filter_; }
@@ -153,6 +164,7 @@ class SlamSystem {
   double time_ = 0.0;
   std::deque<std::pair<double, std::pair<Eigen::Vector3d, Eigen::Matrix3d>>> gyro_;
   Eigen::Vector3d initial_v_ = Eigen::Vector3d::Zero(), initial_w_ = Eigen::Vector3d::Zero();
+  std::vector<std::int64_t> last_ids_;
   std::vector<Eigen::Vector3d> known_positions_;
   std::vector<std::vector<float>> known_descriptors_;
 };

@@ -57,6 +57,15 @@ const Table& table() {
       SKIN3D_INT("consensus_iterations", consensus_iterations),
       SKIN3D_DOUBLE("consensus_gate", consensus_gate),
       SKIN3D_DOUBLE("measurement_white_fraction", measurement_white_fraction),
+      {"smoother", {[](const SlamOptions& o) { return o.smoother; },
+                    [](SlamOptions* o, const std::string& v) {
+                      // YAML 1.1 (rosparam) reads an unquoted off as the boolean false
+                      const std::string w = v == "false" ? "off" : v;
+                      if (w != "off" && w != "batch") kText.bad("smoother", "'" + v + "' is not one of off, batch");
+                      o->smoother = w;
+                    }}},
+      SKIN3D_DOUBLE("smoother_huber", smoother_huber),
+      SKIN3D_INT("smoother_iterations", smoother_iterations),
       SKIN3D_DOUBLE("gamma", filter.gamma),
       SKIN3D_DOUBLE("lambda", filter.lambda),
       SKIN3D_DOUBLE("velocity_noise", filter.velocity_noise),

@@ -49,6 +49,10 @@ void SlamOptions::validate() const {
   if (!(max_depth > 0.0)) bad("max_depth (> 0)", max_depth);
   if (consensus_iterations < 0) bad("consensus_iterations (>= 0)", consensus_iterations);
   if (!(consensus_gate > 0.0)) bad("consensus_gate (> 0)", consensus_gate);
+  if (smoother != "off" && smoother != "batch")
+    throw std::invalid_argument("slam option 'smoother' is '" + smoother + "', not one of off, batch");
+  if (!(smoother_huber > 0.0) || !std::isfinite(smoother_huber)) bad("smoother_huber (> 0)", smoother_huber);
+  if (smoother_iterations < 1) bad("smoother_iterations (>= 1)", smoother_iterations);
   if (!(measurement_white_fraction > 0.0 && measurement_white_fraction <= 1.0))
     bad("measurement_white_fraction (in (0, 1])", measurement_white_fraction);
 }
@@ -137,12 +141,17 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
   stats.time = time;
   stats.measurements = static_cast<int>(input.size());
   std::vector<Measurement> meas;
+  std::vector<int> input_index;  // meas[i] is input[input_index[i]]
   meas.reserve(input.size());
-  for (const auto& m : input) {
-    if (validMeasurement(m) && (meas.empty() || m.descriptor.size() == meas.front().descriptor.size()))
+  last_ids_.assign(input.size(), -1);
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    const Measurement& m = input[i];
+    if (validMeasurement(m) && (meas.empty() || m.descriptor.size() == meas.front().descriptor.size())) {
       meas.push_back(m);
-    else
+      input_index.push_back(static_cast<int>(i));
+    } else {
       ++stats.rejected_invalid;
+    }
   }
 
   if (!initialised_) {
@@ -226,6 +235,7 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
     stats.nis = r.nis;
     stats.nis_dof = r.dof;
   }
+  for (const auto& u : a.matches) last_ids_[input_index[u.measurement]] = pool_.record(u.slot).id;
   const int before_forks = pool_.used();
   const PoolChanges fork_changes = pool_.commit(a, descs, strengths);
   stats.forks_deleted = before_forks - pool_.used();
@@ -242,6 +252,7 @@ FrameStats SlamSystem::processFrame(double time, const std::vector<Measurement>&
       applyChanges(al.changes, &stats);
       if (al.slot < 0) break;  // full, every landmark observed in this frame
       filter_.addLandmark(al.slot, meas[mi].z, meas[mi].C);
+      last_ids_[input_index[mi]] = pool_.record(al.slot).id;
       ++stats.initialised;
     }
   }

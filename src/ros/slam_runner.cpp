@@ -179,7 +179,7 @@ void SlamRunner::processLocked(const skin3d::LandmarkArray& msg) {
       f.p = slam_->filter().state().p;
       f.q = slam_->filter().state().q;
       for (std::size_t i = 0; i < meas.size() && i < ids.size(); ++i)
-        if (ids[i] >= 0) f.observations.push_back({ids[i], meas[i].z, meas[i].C});
+        if (ids[i] >= 0) f.observations.push_back({ids[i], meas[i].z, meas[i].C, meas[i].descriptor});
       smoother_frames_.push_back(std::move(f));
     }
   } catch (const std::exception& e) {
@@ -278,6 +278,8 @@ void SlamRunner::smoothInto(slam::RunRecord* run) {
   so.velocity_noise = o.filter.velocity_noise;
   so.estimate_gyro_bias = o.filter.estimate_gyro_bias;
   so.threads = o.filter.threads;
+  so.loop_radius = o.smoother_loop_radius;
+  so.loop_descriptor_distance = o.pool.max_descriptor_distance;
   const std::vector<slam::GyroSample> none;
   const slam::SmootherResult r = slam::smooth(smoother_frames_, o.use_gyro ? smoother_gyro_ : none, so);
   log_.info("smoother: " + r.message);

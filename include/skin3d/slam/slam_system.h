@@ -73,6 +73,9 @@ struct SlamOptions {
   std::string smoother = "off";
   double smoother_huber = 2.80;     //!< Huber radius of a landmark residual, in sigmas (chi^2 3 dof 95 %)
   int smoother_iterations = 50;     //!< Levenberg-Marquardt iterations at most
+  /** m: loop closure in the smoother (a landmark found again under a new id, within this distance of the old
+   *  one on the first solution's map and alike in descriptor, joins it); 0 = off. */
+  double smoother_loop_radius = 0.005;
   /** @throws std::invalid_argument naming the bad field (also validates filter and pool options). */
   void validate() const;
 };

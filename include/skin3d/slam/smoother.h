@@ -45,6 +45,11 @@ struct SmootherOptions {
    *  frame to frame, which the landmark's own position absorbs here. */
   bool estimate_variance_factor = true;
   int threads = 2;
+  /** Loop closure: a landmark first seen after another was last seen, within this distance of it on the first
+   *  solution's map (m) and with a descriptor closer than loop_descriptor_distance (and than 0.8 of the next
+   *  candidate's), is that landmark found again; the problem is solved again with the two joined. 0 = off. */
+  double loop_radius = 0.005;
+  double loop_descriptor_distance = 0.3;  //!< the pool's max_descriptor_distance
   /** @throws std::invalid_argument naming the bad field. */
   void validate() const;
 };
@@ -58,6 +63,7 @@ struct SmootherFrame {
     std::int64_t landmark = -1;   //!< the pool's landmark id
     Eigen::Vector3d z = Eigen::Vector3d::Zero();  //!< m, left optical frame
     Eigen::Matrix3d C = Eigen::Matrix3d::Identity();
+    std::vector<float> descriptor;  //!< for loop closure (may be empty)
   };
   std::vector<Observation> observations;
 };
@@ -75,10 +81,12 @@ struct SmootherResult {
   std::vector<Eigen::Quaterniond> q;
   std::vector<Eigen::Vector3d> gyro_bias;  //!< per frame, rad/s (the initial bias when not estimated)
   Eigen::Matrix3d final_bias_covariance = Eigen::Matrix3d::Zero();  //!< (rad/s)^2 at the last frame; zero if unknown
-  int landmarks = 0, observations = 0, outliers = 0;  //!< outliers: residual beyond the Huber radius at the end
+  int landmarks = 0, observations = 0, outliers = 0;
+  int loops = 0;                        //!< landmarks found again under a new id and joined (loop closure)  //!< outliers: residual beyond the Huber radius at the end
   int iterations = 0;
   double sigma0 = 1.0;                  //!< the landmark measurements' sigma factor used (1: not estimated)
-  std::vector<std::pair<std::int64_t, Eigen::Vector3d>> landmark_positions;  //!< id, world (m), ascending id
+  /** id, world (m), ascending id; an id joined to an earlier one by loop closure has that one's position. */
+  std::vector<std::pair<std::int64_t, Eigen::Vector3d>> landmark_positions;
   double initial_cost = 0.0, final_cost = 0.0;
   double seconds = 0.0, solve_seconds = 0.0, covariance_seconds = 0.0;
 };

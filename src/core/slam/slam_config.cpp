@@ -66,6 +66,7 @@ const Table& table() {
                     }}},
       SKIN3D_DOUBLE("smoother_huber", smoother_huber),
       SKIN3D_INT("smoother_iterations", smoother_iterations),
+      SKIN3D_DOUBLE("smoother_loop_radius", smoother_loop_radius),
       SKIN3D_DOUBLE("gamma", filter.gamma),
       SKIN3D_DOUBLE("lambda", filter.lambda),
       SKIN3D_DOUBLE("velocity_noise", filter.velocity_noise),

@@ -53,6 +53,7 @@ void SlamOptions::validate() const {
     throw std::invalid_argument("slam option 'smoother' is '" + smoother + "', not one of off, batch");
   if (!(smoother_huber > 0.0) || !std::isfinite(smoother_huber)) bad("smoother_huber (> 0)", smoother_huber);
   if (smoother_iterations < 1) bad("smoother_iterations (>= 1)", smoother_iterations);
+  if (!(smoother_loop_radius >= 0.0) || !std::isfinite(smoother_loop_radius)) bad("smoother_loop_radius (>= 0)", smoother_loop_radius);
   if (!(measurement_white_fraction > 0.0 && measurement_white_fraction <= 1.0))
     bad("measurement_white_fraction (in (0, 1])", measurement_white_fraction);
 }

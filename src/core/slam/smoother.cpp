@@ -31,6 +31,8 @@ void SmootherOptions::validate() const {
   if (!(velocity_noise > 0)) bad("velocity_noise must be > 0");
   if (!initial_gyro_bias.allFinite()) bad("initial_gyro_bias must be finite");
   if (threads < 1) bad("threads must be >= 1");
+  if (!(loop_radius >= 0) || !std::isfinite(loop_radius)) bad("smoother_loop_radius must be >= 0");
+  if (!(loop_descriptor_distance > 0)) bad("the loop's descriptor distance must be > 0");
 }
 
 namespace {
@@ -208,9 +210,12 @@ GyroDelta preintegrate(const std::vector<GyroSample>& s, double t0, double t1, c
   return g;
 }
 
-SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
-                      const SmootherOptions& o) {
-  o.validate();
+namespace {
+
+// One solve of the batch problem. bias_start: per-frame starting biases (empty: the options' initial bias);
+// sigma0 > 0: the measurements' sigma factor, known (else estimated from a first solution and solved again).
+SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
+                         const SmootherOptions& o, const std::vector<Eigen::Vector3d>& bias_start, double sigma0) {
   const auto t_start = std::chrono::steady_clock::now();
   SmootherResult res;
   const std::size_t n = frames.size();
@@ -226,6 +231,7 @@ SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vecto
   // parameters
   std::vector<Eigen::Vector4d> q(n);  // x, y, z, w
   std::vector<Eigen::Vector3d> p(n), b(n, o.initial_gyro_bias);
+  if (bias_start.size() == n) b = bias_start;
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Quaterniond qq = frames[k].q.normalized();
     q[k] = Eigen::Vector4d(qq.x(), qq.y(), qq.z(), qq.w());
@@ -255,7 +261,8 @@ SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vecto
   }
   problem.SetParameterBlockConstant(q[0].data());
   problem.SetParameterBlockConstant(p[0].data());
-  double scale = 1.0;  // 1 / sigma_0 of the landmark measurements (variance factor), see below
+  double scale = sigma0 > 0 ? 1.0 / sigma0 : 1.0;  // 1 / sigma_0 of the landmark measurements, see below
+  res.sigma0 = sigma0 > 0 ? sigma0 : 1.0;
   std::vector<std::pair<ceres::ResidualBlockId, double>> landmark_blocks;
   for (std::size_t k = 0; k < n; ++k) {
     for (const auto& ob : frames[k].observations) {
@@ -329,7 +336,7 @@ SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vecto
   // are smaller than C says and the images would be under-weighted against the gyroscope. Their variance
   // factor sigma_0^2 (the a posteriori estimate: the landmark residuals' chi^2 over its degrees of freedom,
   // the inliers' only) is estimated from this recording and the problem solved again with C sigma_0^2.
-  if (o.estimate_variance_factor && summary.IsSolutionUsable()) {
+  if (o.estimate_variance_factor && !(sigma0 > 0) && summary.IsSolutionUsable()) {
     double chi2 = 0;
     int inliers = 0;
     for (auto& lb : landmark_blocks) {
@@ -392,6 +399,125 @@ SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vecto
                 "; solved in " + std::to_string(res.solve_seconds) + " s, bias covariance in " +
                 std::to_string(res.covariance_seconds) + " s";
   return res;
+}
+
+
+// Landmarks the filter lost and found again under a new id (a loop: the orbit comes back to skin it saw long
+// before): a later landmark is the earlier one when it was first seen after that one was last seen, lies within
+// loop_radius of it on the smoothed map, and their descriptors are closer than loop_descriptor_distance and than
+// 0.8 of the next candidate's. Rewrites the ids in `frames`; returns how many landmarks were merged.
+int closeLoops(const SmootherResult& r, std::vector<SmootherFrame>* frames, const SmootherOptions& o,
+               std::map<std::int64_t, std::int64_t>* joined) {
+  struct Info {
+    Eigen::Vector3d m;
+    int first = -1, last = -1;
+    const std::vector<float>* descriptor = nullptr;
+  };
+  std::map<std::int64_t, Info> info;
+  for (const auto& kv : r.landmark_positions) info[kv.first].m = kv.second;
+  for (int k = 0; k < static_cast<int>(frames->size()); ++k)
+    for (const auto& ob : (*frames)[k].observations) {
+      auto it = info.find(ob.landmark);
+      if (it == info.end()) continue;
+      if (it->second.first < 0) it->second.first = k;
+      it->second.last = k;
+      if (!it->second.descriptor && !ob.descriptor.empty()) it->second.descriptor = &ob.descriptor;
+    }
+  std::vector<std::pair<std::int64_t, Info*>> byx;
+  for (auto& kv : info)
+    if (kv.second.descriptor && kv.second.first >= 0) byx.push_back({kv.first, &kv.second});
+  std::sort(byx.begin(), byx.end(), [](const auto& a, const auto& b) { return a.second->m.x() < b.second->m.x(); });
+  std::vector<std::size_t> order(byx.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return byx[a].second->first < byx[b].second->first; });
+  std::map<std::int64_t, std::int64_t> parent;  // merged id -> the id it joins
+  std::map<std::int64_t, int> root_last;         // a set's last frame
+  auto find = [&](std::int64_t id) {
+    while (parent.count(id)) id = parent[id];
+    return id;
+  };
+  auto distance = [](const std::vector<float>& a, const std::vector<float>& b) {
+    if (a.size() != b.size()) return std::numeric_limits<double>::infinity();
+    double s = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) s += (a[i] - b[i]) * (a[i] - b[i]);
+    return std::sqrt(s);
+  };
+  int merged = 0;
+  for (std::size_t oi : order) {
+    const Info& B = *byx[oi].second;
+    // candidates: earlier landmarks within the radius (x-sorted scan)
+    double best = std::numeric_limits<double>::infinity(), second = best;
+    std::int64_t best_id = -1;
+    for (int dir = -1; dir <= 1; dir += 2) {
+      for (std::ptrdiff_t j = static_cast<std::ptrdiff_t>(oi) + dir; j >= 0 && j < static_cast<std::ptrdiff_t>(byx.size()); j += dir) {
+        const Info& A = *byx[j].second;
+        if (std::fabs(A.m.x() - B.m.x()) > o.loop_radius) break;
+        if ((A.m - B.m).norm() > o.loop_radius) continue;
+        const std::int64_t root = find(byx[j].first);
+        const int last = root_last.count(root) ? root_last[root] : A.last;
+        if (!(std::max(last, A.last) < B.first)) continue;
+        const double d = distance(*A.descriptor, *B.descriptor);
+        if (d < best) {
+          second = best;
+          best = d;
+          best_id = byx[j].first;
+        } else if (d < second) {
+          second = d;
+        }
+      }
+    }
+    if (best_id < 0 || !(best < o.loop_descriptor_distance) || !(best < 0.8 * second)) continue;
+    const std::int64_t root = find(best_id);
+    parent[byx[oi].first] = root;
+    root_last[root] = std::max(root_last.count(root) ? root_last[root] : info[root].last, B.last);
+    ++merged;
+  }
+  if (merged)
+    for (auto& f : *frames)
+      for (auto& ob : f.observations)
+        if (ob.landmark >= 0) ob.landmark = find(ob.landmark);
+  for (const auto& kv : parent) (*joined)[kv.first] = find(kv.first);
+  return merged;
+}
+
+}  // namespace
+
+SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
+                      const SmootherOptions& o) {
+  o.validate();
+  SmootherResult r = solveOnce(frames, gyro, o, {}, 0.0);
+  if (!r.ok || !(o.loop_radius > 0)) return r;
+  std::vector<SmootherFrame> again = frames;
+  std::map<std::int64_t, std::int64_t> joined;
+  const int merged = closeLoops(r, &again, o, &joined);
+  if (merged == 0) {
+    r.message += "; no landmark found again";
+    return r;
+  }
+  for (std::size_t k = 0; k < again.size(); ++k) {
+    again[k].p = r.p[k];
+    again[k].q = r.q[k];
+  }
+  SmootherResult r2 = solveOnce(again, gyro, o, r.gyro_bias, r.sigma0);
+  if (!r2.ok) {
+    r.message += "; the solve with " + std::to_string(merged) + " landmarks found again failed (" + r2.message + ")";
+    return r;
+  }
+  r2.loops = merged;
+  // a joined id's position is its landmark's
+  {
+    std::map<std::int64_t, Eigen::Vector3d> pos(r2.landmark_positions.begin(), r2.landmark_positions.end());
+    for (const auto& kv : joined) {
+      auto it = pos.find(kv.second);
+      if (it != pos.end()) pos[kv.first] = it->second;
+    }
+    r2.landmark_positions.assign(pos.begin(), pos.end());
+  }
+  r2.seconds += r.seconds;
+  r2.solve_seconds += r.solve_seconds;
+  r2.covariance_seconds += r.covariance_seconds;
+  r2.message += "; " + std::to_string(merged) + " landmarks found again (loop closure), sigma factor from the first solve";
+  return r2;
 }
 
 }  // namespace slam

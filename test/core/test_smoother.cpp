@@ -180,11 +180,17 @@ TEST(Smoother, AnOrbitIsSmoothedBackToTheTruthAndItsGyroBiasFound) {
   for (const auto& f : o.start) start_p.push_back(f.p);
   const double before = positionRms(start_p, o.truth), after = positionRms(r.p, o.truth);
   std::printf("%s\nposition RMS %.3f mm -> %.3f mm\n", r.message.c_str(), 1e3 * before, 1e3 * after);
+  // the start drifts by 3 mrad/s and 1.4 mm/s: 36 mrad and 16 mm at the end; the smoothed trajectory is held by the
+  // points (0.1 mm lateral, 0.6 mm in depth, some hundred a frame) and the gyro: at least 20 times closer
   EXPECT_GT(before, 3e-3);
-  EXPECT_LT(after, 0.3e-3);  // the points' 0.1 mm lateral error over ~100 landmarks a frame
-  double rot = 0;
-  for (std::size_t k = 0; k < r.q.size(); ++k) rot = std::max(rot, r.q[k].angularDistance(o.truth[k].q));
-  EXPECT_LT(rot, 1e-3);
+  EXPECT_LT(after, before / 20);
+  double rot = 0, rot_before = 0;
+  for (std::size_t k = 0; k < r.q.size(); ++k) {
+    rot = std::max(rot, r.q[k].angularDistance(o.truth[k].q));
+    rot_before = std::max(rot_before, o.start[k].q.angularDistance(o.truth[k].q));
+  }
+  std::printf("largest rotation error %.3f mrad -> %.3f mrad\n", 1e3 * rot_before, 1e3 * rot);
+  EXPECT_LT(rot, rot_before / 20);
   // the bias: within 3 stated std on each axis, the std a real one (not the prior's 10 mrad/s)
   const Eigen::Vector3d b = r.gyro_bias.back();
   for (int i = 0; i < 3; ++i) {
@@ -255,7 +261,9 @@ TEST(Smoother, WithoutTheGyroThePosesAreSmoothedAndNoBiasIsMade) {
   const Orbit o = makeOrbit(12);
   const SmootherResult r = skin3d::slam::smooth(o.start, {}, SmootherOptions());
   ASSERT_TRUE(r.ok) << r.message;
-  EXPECT_LT(positionRms(r.p, o.truth), 0.3e-3);
+  std::vector<Eigen::Vector3d> start_p;
+  for (const auto& f : o.start) start_p.push_back(f.p);
+  EXPECT_LT(positionRms(r.p, o.truth), positionRms(start_p, o.truth) / 20);
   EXPECT_TRUE(r.final_bias_covariance.isZero());
 }
 

@@ -212,6 +212,60 @@ GyroDelta preintegrate(const std::vector<GyroSample>& s, double t0, double t1, c
 
 namespace {
 
+// The gyro's factors: the bias blocks (held when not estimated), their prior and random walk, and the rotation
+// between consecutive frames. Returns the number of rotation factors.
+int addGyroFactors(ceres::Problem* problem, const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
+                   const SmootherOptions& o, std::vector<Eigen::Vector4d>* q, std::vector<Eigen::Vector3d>* b) {
+  const std::size_t n = frames.size();
+  int factors = 0;
+  for (std::size_t k = 0; k < n; ++k) problem->AddParameterBlock((*b)[k].data(), 3);
+  if (!o.estimate_gyro_bias)
+    for (std::size_t k = 0; k < n; ++k) problem->SetParameterBlockConstant((*b)[k].data());
+  problem->AddResidualBlock(new ceres::AutoDiffCostFunction<BiasPriorCost, 3, 3>(
+                               new BiasPriorCost(o.initial_gyro_bias, 1.0 / o.initial_gyro_bias_std)),
+                           nullptr, (*b)[0].data());
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    const double dt = frames[k + 1].t - frames[k].t;
+    problem->AddResidualBlock(new ceres::AutoDiffCostFunction<BiasWalkCost, 3, 3, 3>(
+                                 new BiasWalkCost(1.0 / (o.gyro_bias_walk * std::sqrt(dt)))),
+                             nullptr, (*b)[k].data(), (*b)[k + 1].data());
+    const GyroDelta g = preintegrate(gyro, frames[k].t, frames[k + 1].t, o.initial_gyro_bias, o.gyro_noise);
+    if (!(g.dt > 0)) continue;
+    Eigen::LLT<Eigen::Matrix3d> llt(g.covariance);
+    if (llt.info() != Eigen::Success) continue;
+    const Eigen::Matrix3d W = Eigen::Matrix3d(llt.matrixL()).inverse();
+    problem->AddResidualBlock(new ceres::AutoDiffCostFunction<GyroCost, 3, 4, 4, 3>(new GyroCost(g, W)), nullptr,
+                             (*q)[k].data(), (*q)[k + 1].data(), (*b)[k].data());
+    ++factors;
+  }
+  return factors;
+}
+
+// The landmark measurements' sigma factor from a solution: the inliers' chi^2 over the degrees of freedom,
+// corrected for the Huber cut (only the inliers are counted: a chi^2 (3 dof) cut at c = huber^2 has the mean
+// 3 P5(c) / P3(c), Pk the chi^2 distribution function with k dof, P5(c) = P3(c) - (c/2)^1.5 e^(-c/2) / Gamma(5/2)).
+// 0 when there are too few degrees of freedom.
+double varianceFactor(ceres::Problem& problem, const std::vector<std::pair<ceres::ResidualBlockId, double>>& blocks,
+                      double huber, std::size_t landmarks, std::size_t frames) {
+  double chi2 = 0;
+  int inliers = 0;
+  for (auto& lb : blocks) {
+    double r[3], c = 0;
+    problem.EvaluateResidualBlock(lb.first, false, &c, r, nullptr);
+    const double d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+    if (d2 <= huber * huber) {
+      chi2 += d2;
+      ++inliers;
+    }
+  }
+  const double dof = 3.0 * inliers - 3.0 * static_cast<double>(landmarks) - 6.0 * static_cast<double>(frames - 1);
+  if (!(dof > 10 && chi2 > 0)) return 0.0;
+  const double c = huber * huber;
+  const double p3 = std::erf(std::sqrt(0.5 * c)) - std::sqrt(2.0 * c / M_PI) * std::exp(-0.5 * c);
+  const double p5 = p3 - std::pow(0.5 * c, 1.5) * std::exp(-0.5 * c) / std::tgamma(2.5);
+  return std::sqrt(chi2 / (dof * p5 / p3));
+}
+
 // One solve of the batch problem. bias_start: per-frame starting biases (empty: the options' initial bias);
 // sigma0 > 0: the measurements' sigma factor, known (else estimated from a first solution and solved again).
 SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
@@ -277,30 +331,7 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
   }
   res.observations = static_cast<int>(landmark_blocks.size());
   res.landmarks = static_cast<int>(m.size());
-  // gyro
-  int gyro_factors = 0;
-  if (!gyro.empty()) {
-    for (std::size_t k = 0; k < n; ++k) problem.AddParameterBlock(b[k].data(), 3);
-    if (!o.estimate_gyro_bias)
-      for (std::size_t k = 0; k < n; ++k) problem.SetParameterBlockConstant(b[k].data());
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasPriorCost, 3, 3>(
-                                 new BiasPriorCost(o.initial_gyro_bias, 1.0 / o.initial_gyro_bias_std)),
-                             nullptr, b[0].data());
-    for (std::size_t k = 0; k + 1 < n; ++k) {
-      const double dt = frames[k + 1].t - frames[k].t;
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<BiasWalkCost, 3, 3, 3>(
-                                   new BiasWalkCost(1.0 / (o.gyro_bias_walk * std::sqrt(dt)))),
-                               nullptr, b[k].data(), b[k + 1].data());
-      const GyroDelta g = preintegrate(gyro, frames[k].t, frames[k + 1].t, o.initial_gyro_bias, o.gyro_noise);
-      if (!(g.dt > 0)) continue;
-      Eigen::LLT<Eigen::Matrix3d> llt(g.covariance);
-      if (llt.info() != Eigen::Success) continue;
-      const Eigen::Matrix3d W = Eigen::Matrix3d(llt.matrixL()).inverse();
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<GyroCost, 3, 4, 4, 3>(new GyroCost(g, W)), nullptr,
-                               q[k].data(), q[k + 1].data(), b[k].data());
-      ++gyro_factors;
-    }
-  }
+  const int gyro_factors = gyro.empty() ? 0 : addGyroFactors(&problem, frames, gyro, o, &q, &b);
   for (std::size_t k = 1; k + 1 < n; ++k)
     problem.AddResidualBlock(new ceres::AutoDiffCostFunction<MotionCost, 3, 3, 3, 3>(new MotionCost(
                                  frames[k].t - frames[k - 1].t, frames[k + 1].t - frames[k].t, o.velocity_noise)),
@@ -337,25 +368,8 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
   // factor sigma_0^2 (the a posteriori estimate: the landmark residuals' chi^2 over its degrees of freedom,
   // the inliers' only) is estimated from this recording and the problem solved again with C sigma_0^2.
   if (o.estimate_variance_factor && !(sigma0 > 0) && summary.IsSolutionUsable()) {
-    double chi2 = 0;
-    int inliers = 0;
-    for (auto& lb : landmark_blocks) {
-      double r[3], c = 0;
-      problem.EvaluateResidualBlock(lb.first, false, &c, r, nullptr);
-      const double d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-      if (d2 <= o.huber * o.huber) {
-        chi2 += d2;
-        ++inliers;
-      }
-    }
-    const double dof = 3.0 * inliers - 3.0 * static_cast<double>(m.size()) - 6.0 * static_cast<double>(n - 1);
-    if (dof > 10 && chi2 > 0) {
-      // only the inliers are counted: a chi^2 (3 dof) cut at c = huber^2 has the mean 3 P5(c) / P3(c) (Pk: the
-      // chi^2 distribution function with k dof; P5(c) = P3(c) - (c/2)^1.5 e^(-c/2) / Gamma(5/2))
-      const double c = o.huber * o.huber;
-      const double p3 = std::erf(std::sqrt(0.5 * c)) - std::sqrt(2.0 * c / M_PI) * std::exp(-0.5 * c);
-      const double p5 = p3 - std::pow(0.5 * c, 1.5) * std::exp(-0.5 * c) / std::tgamma(2.5);
-      const double f = std::sqrt(chi2 / (dof * p5 / p3));
+    const double f = varianceFactor(problem, landmark_blocks, o.huber, m.size(), n);
+    if (f > 0) {
       res.sigma0 = f;
       scale = 1.0 / f;
       ceres::Solver::Summary again;

@@ -308,10 +308,9 @@ void SlamRunner::smoothInto(slam::RunRecord* run) {
   run->info.push_back({"smoother", r.message});
   run->info.push_back({"smoother_seconds", std::to_string(r.seconds)});
   if (o.use_gyro && !r.gyro_bias.empty()) {
-    const Eigen::Vector3d b = r.gyro_bias.back();
-    const Eigen::Vector3d sd = r.final_bias_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
-    run->info.push_back({"smoother_final_gyro_bias_rad_s", "[" + std::to_string(b.x()) + ", " + std::to_string(b.y()) + ", " + std::to_string(b.z()) + "]"});
-    run->info.push_back({"smoother_final_gyro_bias_std_rad_s", "[" + std::to_string(sd.x()) + ", " + std::to_string(sd.y()) + ", " + std::to_string(sd.z()) + "]"});
+    run->smoother_bias_valid = true;
+    run->smoother_bias = r.gyro_bias.back();
+    run->smoother_bias_std = r.final_bias_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   }
   smoothed_ = true;
 }
@@ -344,6 +343,8 @@ bool SlamRunner::saveLocked(const std::string& dir, std::string* message,
     const std::string text = slam::writeResults(dir, written);
     if (smoothed_)
       slam::writeTum(dir + "/trajectory_filter.tum", run_.trajectory);
+    else
+      std::remove((dir + "/trajectory_filter.tum").c_str());  // an earlier save's, when this one has no smoother run
     const slam::SlamOptions& o = slam_->options();
     common::writeParameters(dir + "/parameters.yaml", "ES-EKF SLAM, keys of config/slam.yaml",
                             command_line.empty() ? std::vector<std::string>{node_name_} : command_line,

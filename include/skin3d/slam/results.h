@@ -122,6 +122,10 @@ struct RunRecord {
   double ate_max_dt = 0.01;  //!< s, the time association tolerance of the ATE
   bool fit_sphere = true;                     //!< robust sphere fit of the map -> sphere_fit.yaml
   std::vector<std::pair<std::string, std::string>> info;  //!< extra summary lines (key, value as text)
+  /** The smoother's gyro bias at the last frame, rad/s, with its std (summary.yaml smoother_final_gyro_bias);
+   *  written when `smoother_bias_valid`. */
+  bool smoother_bias_valid = false;
+  Eigen::Vector3d smoother_bias = Eigen::Vector3d::Zero(), smoother_bias_std = Eigen::Vector3d::Zero();
 };
 
 /**

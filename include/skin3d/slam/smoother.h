@@ -12,8 +12,8 @@
  *    Exp((omega_s - b) dt_s) over the samples (piecewise constant between stamps), corrected to first order
  *    in the bias, its covariance propagated from the per-sample noise;
  *  - bias random walk between frames (gyro_bias_walk sqrt(dt)) and the bias prior at the first frame;
- *  - motion: the filter's random walk of the velocity on the second difference of the positions
- *    (velocity_noise sqrt(dt) dt): holds frames with few landmarks, weak elsewhere.
+ *  - motion: the filter's model, the velocity in the rig's frame R_k^T (p_k+1 - p_k) / dt changing between frames
+ *    by its random walk (velocity_noise sqrt(dt)): holds frames with few landmarks, weak elsewhere.
  * The first frame's pose is held fixed (it defines the world).
  *
  * Not thread-safe. SPDX-License-Identifier: BSD-3-Clause

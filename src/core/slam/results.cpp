@@ -327,6 +327,14 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
   YAML::Emitter y;
   y << YAML::BeginMap;
   for (const auto& kv : run.info) y << YAML::Key << kv.first << YAML::Value << kv.second;
+  if (run.smoother_bias_valid) {
+    y << YAML::Key << "smoother_final_gyro_bias" << YAML::Value << YAML::BeginMap << YAML::Key << "rad_s" << YAML::Value
+      << YAML::Flow << YAML::BeginSeq;
+    for (int i = 0; i < 3; ++i) y << run.smoother_bias[i];
+    y << YAML::EndSeq << YAML::Key << "std_rad_s" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+    for (int i = 0; i < 3; ++i) y << run.smoother_bias_std[i];
+    y << YAML::EndSeq << YAML::EndMap;
+  }
   y << YAML::Key << "frames" << YAML::Value << run.trajectory.size();
   y << YAML::Key << "landmarks_in_map" << YAML::Value << run.map.size();
   if (!run.rows.empty()) {

@@ -129,14 +129,18 @@ struct BiasPriorCost {
   double w_;
 };
 
-// Second difference of the positions against the velocity random walk.
+// The filter's motion model: the velocity in the rig's frame, v_k = R_k^T (p_k+1 - p_k) / dt_k, changes from frame
+// to frame by its random walk (velocity_noise sqrt(dt)). (In the world's frame a turning rig's velocity turns too.)
 struct MotionCost {
   MotionCost(double dt1, double dt2, double sigma_v) : dt1_(dt1), dt2_(dt2) {
     w_ = 1.0 / (sigma_v * std::sqrt(0.5 * (dt1 + dt2)));
   }
   template <typename T>
-  bool operator()(const T* a, const T* b, const T* c, T* r) const {
-    for (int i = 0; i < 3; ++i) r[i] = T(w_) * ((c[i] - b[i]) / T(dt2_) - (b[i] - a[i]) / T(dt1_));
+  bool operator()(const T* qa, const T* qb, const T* a, const T* b, const T* c, T* r) const {
+    const T qai[4] = {-qa[0], -qa[1], -qa[2], qa[3]}, qbi[4] = {-qb[0], -qb[1], -qb[2], qb[3]};
+    const Eigen::Matrix<T, 3, 1> va = rotate(qai, Eigen::Matrix<T, 3, 1>(b[0] - a[0], b[1] - a[1], b[2] - a[2])) / T(dt1_);
+    const Eigen::Matrix<T, 3, 1> vb = rotate(qbi, Eigen::Matrix<T, 3, 1>(c[0] - b[0], c[1] - b[1], c[2] - b[2])) / T(dt2_);
+    for (int i = 0; i < 3; ++i) r[i] = T(w_) * (vb[i] - va[i]);
     return true;
   }
   double dt1_, dt2_, w_;
@@ -333,9 +337,9 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
   res.landmarks = static_cast<int>(m.size());
   const int gyro_factors = gyro.empty() ? 0 : addGyroFactors(&problem, frames, gyro, o, &q, &b);
   for (std::size_t k = 1; k + 1 < n; ++k)
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<MotionCost, 3, 3, 3, 3>(new MotionCost(
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<MotionCost, 3, 4, 4, 3, 3, 3>(new MotionCost(
                                  frames[k].t - frames[k - 1].t, frames[k + 1].t - frames[k].t, o.velocity_noise)),
-                             nullptr, p[k - 1].data(), p[k].data(), p[k + 1].data());
+                             nullptr, q[k - 1].data(), q[k].data(), p[k - 1].data(), p[k].data(), p[k + 1].data());
 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_SCHUR;

@@ -276,7 +276,9 @@ void SlamRunner::smoothInto(slam::RunRecord* run) {
   so.initial_gyro_bias_std = o.filter.initial_gyro_bias_std;
   so.initial_gyro_bias = o.filter.initial_gyro_bias;
   so.velocity_noise = o.filter.velocity_noise;
-  so.estimate_gyro_bias = o.filter.estimate_gyro_bias;
+  // the bias is estimated over the whole recording whether or not the filter estimates it: the prior is
+  // initial_gyro_bias with initial_gyro_bias_std (a still recording's, from scripts/gyro_bias.py, or the default 10 mrad/s)
+  so.estimate_gyro_bias = true;
   so.threads = o.filter.threads;
   so.loop_radius = o.smoother_loop_radius;
   so.loop_descriptor_distance = o.pool.max_descriptor_distance;
@@ -299,6 +301,7 @@ void SlamRunner::smoothInto(slam::RunRecord* run) {
     run->trajectory[k].q = r.q[k];
   }
   run->info[line] = {"trajectory", "smoother (batch; the filter's: trajectory_filter.tum)"};
+  if (r.pose_covariance.size() == run->trajectory.size()) run->smoother_pose_covariance = r.pose_covariance;
   // the map: the smoothed positions of the landmarks the smoother had (the others as the filter left them)
   for (auto& mp : run->map) {
     auto it = std::lower_bound(r.landmark_positions.begin(), r.landmark_positions.end(), mp.id,
@@ -311,6 +314,8 @@ void SlamRunner::smoothInto(slam::RunRecord* run) {
     run->smoother_bias_valid = true;
     run->smoother_bias = r.gyro_bias.back();
     run->smoother_bias_std = r.final_bias_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+    run->smoother_mean_bias = r.mean_bias();
+    run->smoother_mean_bias_std = r.mean_bias_covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   }
   smoothed_ = true;
 }

@@ -3,10 +3,13 @@
 process_bag results directories with ground truth, and over Monte Carlo runs its average against the chi^2 band.
 
 Usage: slam_nees.py [--confidence 0.95] [--min-inside 0.9] [--plot FILE.png] [--calibrated-frame] [--landmarks]
+                    [--trajectory auto|filter|smoother]
                     RESULTS_DIR [RESULTS_DIR ...]
 
 Each RESULTS_DIR holds trajectory.tum, ground_truth.tum (the bag's ground_truth/pose, in the SLAM's world:
-process_bag writes it) and rig_covariance.csv. Per frame k and run i the pose error is
+process_bag writes it) and rig_covariance.csv; with the batch smoother (smoother: batch) trajectory.tum is the
+smoother's, its covariance smoother_covariance.csv, and the filter's trajectory_filter.tum (--trajectory picks one;
+the default is the smoother's when the run has it). Per frame k and run i the pose error is
 e = [p_true - p_est, Log(R_true R_est^T)] (m, rad: the true state minus the estimate, with the filter's global angular error
 R_true = Exp(dtheta) R_est; both parts must have that same sign),
 NEES_ik = e^T P^-1 e with P the 6x6 [p, theta] block of the rig covariance (6 dof). Frames whose P is singular
@@ -110,19 +113,35 @@ def landmark_nees(d, calibrated_frame=False):
     return np.array(out)
 
 
-def run_nees(d, calibrated_frame=False):
+def trajectory_files(d, which="auto"):
+    """The trajectory and the covariance that belongs to it: (trajectory file, covariance file) in d.
+
+    which: 'filter' = the causal filter's (trajectory_filter.tum when a smoother wrote trajectory.tum, else
+    trajectory.tum; with rig_covariance.csv); 'smoother' = trajectory.tum with smoother_covariance.csv; 'auto' =
+    the smoother's when d has smoother_covariance.csv, else the filter's."""
+    smoothed = os.path.exists(os.path.join(d, "smoother_covariance.csv"))
+    if which == "smoother" or (which == "auto" and smoothed):
+        return "trajectory.tum", "smoother_covariance.csv"
+    if os.path.exists(os.path.join(d, "trajectory_filter.tum")):
+        return "trajectory_filter.tum", "rig_covariance.csv"
+    return "trajectory.tum", "rig_covariance.csv"
+
+
+def run_nees(d, calibrated_frame=False, which="auto"):
     """Per-frame pose NEES of one results directory: dict t -> NEES (frames with a singular P left out)."""
-    for f in ("trajectory.tum", "ground_truth.tum", "rig_covariance.csv"):
+    traj, cov = trajectory_files(d, which)
+    for f in (traj, "ground_truth.tum", cov):
         if not os.path.exists(os.path.join(d, f)):
-            raise ValueError("'%s' has no %s (process_bag on a bag with ground_truth/pose writes it)" % (d, f))
-    te, pe, qe = read_tum(os.path.join(d, "trajectory.tum"))
+            raise ValueError("'%s' has no %s (process_bag on a bag with ground_truth/pose writes it%s)"
+                             % (d, f, "; smoother: batch writes smoother_covariance.csv" if f == cov and which == "smoother" else ""))
+    te, pe, qe = read_tum(os.path.join(d, traj))
     tg, pg, qg = read_tum(os.path.join(d, "ground_truth.tum"))
     Rg = [rotation(q) for q in qg]
     if calibrated_frame:  # T' = E T E^-1: R' = Re R Re^T, p' = Re p + te - R' te
         Re, te_ = measured_frame(d)
         Rg = [Re @ R @ Re.T for R in Rg]
         pg = np.array([Re @ p + te_ - R @ te_ for p, R in zip(pg, Rg)])
-    tc, P = read_covariances(os.path.join(d, "rig_covariance.csv"))
+    tc, P = read_covariances(os.path.join(d, cov))
     out = {}
     for k, t in enumerate(te):
         j = int(np.argmin(np.abs(tg - t)))
@@ -151,11 +170,15 @@ def main(argv=None):
                     help="also the radial NEES (1 dof) of each run's final map against the true sphere (globe)")
     ap.add_argument("--calibrated-frame", action="store_true",
                     help="compare with the true poses of the frame the bag's calibration defines (see above)")
+    ap.add_argument("--trajectory", choices=("auto", "filter", "smoother"), default="auto",
+                    help="which trajectory: the smoother's (trajectory.tum + smoother_covariance.csv, the default when "
+                         "the run has them) or the causal filter's (trajectory_filter.tum or trajectory.tum + "
+                         "rig_covariance.csv)")
     a = ap.parse_args(argv)
     if not 0.5 < a.confidence < 1.0:
         sys.exit("slam_nees: --confidence must be in (0.5, 1)")
     try:
-        runs = [run_nees(d, a.calibrated_frame) for d in a.dirs]
+        runs = [run_nees(d, a.calibrated_frame, a.trajectory) for d in a.dirs]
     except (ValueError, OSError) as e:
         print("slam_nees: %s" % e, file=sys.stderr)
         return 2

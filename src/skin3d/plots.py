@@ -5,7 +5,7 @@ usage: skin3d_plots.py RESULTS_DIR [RESULTS_DIR ...] [--out DIR] [--frame K]
 
 For every SLAM results directory (process_bag or the eskf_slam nodelet: summary.yaml, state.csv,
 rig_covariance.csv, trajectory.tum, ground_truth.tum when the dataset had one, map.ply, sphere_fit.yaml) writes
-  fig7_1_<name>.png  pose, velocities (reference and estimate) and their errors with the filter's 3-sigma bounds
+  fig7_1_<name>.png  pose, velocities (reference and estimate) and their errors with the 3-sigma bounds (the filter's, or the smoother's)
   fig7_2.png         trace of the error-state covariance: rig state / landmarks / all (every run in one plot)
   fig7_4.png         correlation matrix of the rig state at frame K (default 8, as in the thesis) and the end
   sphere_<name>.png  the map and the fitted sphere (Table 7.2): residuals over the sphere and their histogram
@@ -78,6 +78,8 @@ class SlamRun:
         self.traj = read_tum(os.path.join(d, "trajectory.tum"))
         self.truth = read_tum(os.path.join(d, "ground_truth.tum"))
         self.cov_t, self.cov = self._read_cov(os.path.join(d, "rig_covariance.csv"))
+        # the batch smoother's trajectory.tum comes with its own pose covariances ([p, theta] per frame)
+        self.pose_cov_t, self.pose_cov = self._read_cov(os.path.join(d, "smoother_covariance.csv"))
         self.map = read_ply_xyz(os.path.join(d, "map.ply")) if os.path.exists(os.path.join(d, "map.ply")) else None
         bag = self.summary.get("bag")
         self.truth_yaml = load_yaml(bag[:-4] + ".truth.yaml") if isinstance(bag, str) and bag.endswith(".bag") else None
@@ -245,10 +247,12 @@ def load_run(d, name=None):
 # figures (each returns a matplotlib Figure; the caller saves and closes it)
 
 def _sigma(run, rows, idx):
-    """3-sigma bounds of error-state variables idx at the trajectory rows (None without rig_covariance.csv)."""
-    if run.cov is None or len(run.cov) != len(run.traj):
+    """3-sigma bounds of error-state variables idx at the trajectory rows (None without rig_covariance.csv): the
+    pose's (idx < 6) from smoother_covariance.csv when trajectory.tum is the smoother's."""
+    cov = run.pose_cov if run.pose_cov is not None and max(idx) < 6 else run.cov
+    if cov is None or len(cov) != len(run.traj):
         return None
-    return 3 * np.sqrt(np.maximum(run.cov[rows][:, idx, idx], 0))
+    return 3 * np.sqrt(np.maximum(cov[rows][:, idx, idx], 0))
 
 
 def fig_pose_velocity(run):
@@ -284,7 +288,7 @@ def fig_pose_velocity(run):
             ax[1, 1].plot(tr - t0, np.degrees(wr[:, i]), "--", color=c, alpha=0.7, label="ω" + "xyz"[i] + " reference")
     ax[1, 0].set(title="(b) linear velocity (camera frame)", ylabel="mm/s")
     ax[1, 1].set(title="(b) angular velocity (camera frame)", ylabel="deg/s")
-    # (c) errors with the filter's 3-sigma bounds
+    # (c) errors with the estimator's 3-sigma bounds (the smoother's when it wrote trajectory.tum)
     if pr:
         tp = np.array([p[0] for p in pr]) - t0
         rows = np.array([p[5] for p in pr])
@@ -299,7 +303,7 @@ def fig_pose_velocity(run):
                 ax[2, 0].plot(tp, -1e3 * sp[:, i], ":", color=c, lw=0.8)
                 ax[2, 1].plot(tp, 1e3 * sth[:, i], ":", color=c, lw=0.8)
                 ax[2, 1].plot(tp, -1e3 * sth[:, i], ":", color=c, lw=0.8)
-        ax[2, 0].set(title="(c) position error (reference − estimate), dotted: ±3σ of the filter", ylabel="mm")
+        ax[2, 0].set(title="(c) position error (reference − estimate), dotted: ±3σ of the " + ("smoother" if run.pose_cov is not None else "filter"), ylabel="mm")
         ax[2, 1].set(title="(c) orientation error Log(R_ref R_estᵀ), dotted: ±3σ", ylabel="mrad")
     else:
         for a in ax[2]:

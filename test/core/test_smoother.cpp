@@ -200,6 +200,15 @@ TEST(Smoother, AnOrbitIsSmoothedBackToTheTruthAndItsGyroBiasFound) {
     EXPECT_LT(sd, 1e-3);
     EXPECT_LT(std::fabs(b[i] - o.bias[i]), 3.0 * sd) << "axis " << i;
   }
+  // the mean over the recording: within 3 of its std, which is smaller than the last frame's
+  const Eigen::Vector3d mean = r.mean_bias();
+  for (int i = 0; i < 3; ++i) {
+    const double sd = std::sqrt(r.mean_bias_covariance(i, i));
+    std::printf("mean bias %d: %.4f mrad/s, std %.4f mrad/s\n", i, 1e3 * mean[i], 1e3 * sd);
+    EXPECT_GT(sd, 0.0);
+    EXPECT_LT(sd, std::sqrt(r.final_bias_covariance(i, i)));
+    EXPECT_LT(std::fabs(mean[i] - o.bias[i]), 3.0 * sd) << "axis " << i;
+  }
   // the covariances given were the true ones: the variance factor is about 1, and about 5 % of the residuals
   // lie beyond the Huber radius (chi^2, 3 dof, 95 %)
   EXPECT_NEAR(r.sigma0, 1.0, 0.05);
@@ -265,6 +274,45 @@ TEST(Smoother, WithoutTheGyroThePosesAreSmoothedAndNoBiasIsMade) {
   for (const auto& f : o.start) start_p.push_back(f.p);
   EXPECT_LT(positionRms(r.p, o.truth), positionRms(start_p, o.truth) / 20);
   EXPECT_TRUE(r.final_bias_covariance.isZero());
+}
+
+// The poses' stated covariances against their errors over Monte Carlo runs (each its own scene, noise and drifting
+// start; the measurements' covariances the true ones): the average NEES of a frame over N runs, times N, is
+// chi^2 with 6 N dof when the covariances are right. The two-sided 95 % band (Wilson-Hilferty) holds most frames.
+TEST(Smoother, ThePoseCovariancesAreConsistentOverMonteCarloRuns) {
+  const int runs = 24, frames = 40;
+  std::vector<double> nees(frames, 0.0);
+  SmootherOptions opt;
+  for (int i = 0; i < runs; ++i) {
+    const Orbit o = makeOrbit(1000 + i, 0.2, frames);
+    const SmootherResult r = skin3d::slam::smooth(o.start, o.gyro, opt);
+    ASSERT_TRUE(r.ok) << r.message;
+    ASSERT_EQ(r.pose_covariance.size(), static_cast<std::size_t>(frames));
+    EXPECT_TRUE(r.pose_covariance[0].isZero()) << "the first pose defines the world";
+    for (int k = 1; k < frames; ++k) {
+      const skin3d::slam::Matrix6d& P = r.pose_covariance[k];
+      ASSERT_LT((P - P.transpose()).norm(), 1e-12 * P.norm()) << "frame " << k;
+      const Eigen::LLT<skin3d::slam::Matrix6d> llt(P);
+      ASSERT_EQ(llt.info(), Eigen::Success) << "frame " << k << " run " << i << ": not positive definite";
+      Eigen::Matrix<double, 6, 1> e;  // the true state minus the estimate: R_true = Exp(theta) R_est
+      e.head<3>() = o.truth[k].p - r.p[k];
+      e.tail<3>() = logSO3(o.truth[k].q.toRotationMatrix() * r.q[k].toRotationMatrix().transpose());
+      nees[k] += e.dot(llt.solve(e)) / runs;
+    }
+  }
+  const double dof = 6.0 * runs, z = 1.959964;
+  auto quantile = [&](double zz) { const double h = 2.0 / (9.0 * dof); return std::pow(1.0 - h + zz * std::sqrt(h), 3) * dof / runs; };
+  const double lo = quantile(-z), hi = quantile(z);
+  int inside = 0;
+  double mean = 0;
+  for (int k = 1; k < frames; ++k) {
+    inside += nees[k] >= lo && nees[k] <= hi;
+    mean += nees[k] / (frames - 1);
+  }
+  std::printf("average pose NEES %.2f (6 expected); %d of %d frames inside the 95 %% band [%.2f, %.2f]\n", mean, inside,
+              frames - 1, lo, hi);
+  EXPECT_GE(inside, 0.85 * (frames - 1));
+  EXPECT_NEAR(mean, 6.0, 1.0);
 }
 
 TEST(Smoother, BadInputIsNamed) {

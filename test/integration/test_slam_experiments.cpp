@@ -112,6 +112,17 @@ TEST_F(SlamExperiments, TheSmootherOverTheRunBeatsTheFilter) {
   EXPECT_EQ(s["trajectory"].as<std::string>().rfind("smoother", 0), 0u) << s["trajectory"].as<std::string>();
   std::ifstream filter_tum(tmp("exp3s") + "/trajectory_filter.tum");
   EXPECT_TRUE(filter_tum.good());
+  // the smoother's pose covariances: one row per pose of trajectory.tum (t and 36 values), the first frame's zero
+  std::ifstream cov(tmp("exp3s") + "/smoother_covariance.csv");
+  ASSERT_TRUE(cov.good());
+  std::string line;
+  int rows = 0;
+  while (std::getline(cov, line)) {
+    if (line.empty() || line[0] == '#' || line[0] == 't') continue;
+    EXPECT_EQ(std::count(line.begin(), line.end(), ','), 36) << line;
+    ++rows;
+  }
+  EXPECT_EQ(rows, s["frames"].as<int>());
   const double filter = s["filter_ate_se3_rmse_mm"].as<double>(), smoothed = s["ate_se3"]["rmse_mm"].as<double>();
   std::printf("smoother: %s\nSE(3) ATE: filter %.3f mm, smoother %.3f mm; radius %.4f mm\n",
               s["smoother"].as<std::string>().c_str(), filter, smoothed, s["sphere_fit"]["radius_mm"].as<double>());

@@ -8,7 +8,8 @@ usage: check_nees.py [--xunit FILE.xml]
 attitude strongly coupled, as on an orbit), and an estimate whose error true - estimate is drawn from that
 covariance (seeded). A consistent filter must be judged consistent; the same errors with the attitude part's
 sign flipped (the sign mistake the first version of slam_nees.py made), and a covariance 4x too small, must not;
-a directory without ground truth is a clear error (exit 2). Runs made in the frame of a miscalibrated rig are
+a directory without ground truth is a clear error (exit 2). With a smoother's files, the smoother's trajectory is
+judged with its own covariance and the filter's (--trajectory filter) with the filter's. Runs made in the frame of a miscalibrated rig are
 consistent with --calibrated-frame and not without it. The landmarks' radial NEES (--landmarks) reads ~1 for
 errors drawn from their covariances and ~4 for covariances 4x too small.
 """
@@ -38,10 +39,14 @@ def quat(R):
     return np.array([(R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w), w])
 
 
-def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0, frame=None):
+def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0, frame=None, smoother_scale=None):
     """frame = (Re, te): the filter ran in the frame a calibration defines; the ground truth is written in the
-    optical frame (T = E^-1 T' E) and the frame into BAG.truth.yaml beside d, as make_dataset writes it."""
+    optical frame (T = E^-1 T' E) and the frame into BAG.truth.yaml beside d, as make_dataset writes it.
+    smoother_scale: also a smoother's run, as process_bag writes it with smoother: batch: the filter's estimate in
+    trajectory_filter.tum, the smoother's in trajectory.tum with errors drawn from P / 9, and smoother_covariance.csv
+    = smoother_scale P / 9."""
     os.makedirs(d)
+    smoothed = []
     if frame is not None:
         bag = d + ".bag"
         open(d + "/summary.yaml", "w").write("bag: %s\n" % os.path.basename(bag))
@@ -80,6 +85,17 @@ def write_run(d, rng, frames, angle_sign=1.0, cov_scale=1.0, frame=None):
             full[:6, :6] = cov_scale * P
             full[6:, 6:] = np.eye(6) * 1e-4
             fc.write("%.9f," % t + ",".join("%.17g" % v for v in full.ravel()) + "\n")
+            if smoother_scale is not None:
+                es = np.linalg.cholesky(P / 9.0) @ rng.standard_normal(6)
+                smoothed.append((t, p - es[:3], exp_so3(-es[3:]) @ R, smoother_scale * P / 9.0))
+    if smoother_scale is not None:
+        os.rename(d + "/trajectory.tum", d + "/trajectory_filter.tum")
+        with open(d + "/trajectory.tum", "w") as fe, open(d + "/smoother_covariance.csv", "w") as fc:
+            fe.write(head)
+            fc.write("# synthetic\nt," + ",".join("P_%d_%d" % (i, j) for i in range(6) for j in range(6)) + "\n")
+            for t, ps, Rs, Ps in smoothed:
+                fe.write("%.9f %s %s\n" % (t, " ".join("%.12g" % v for v in ps), " ".join("%.12g" % v for v in quat(Rs))))
+                fc.write("%.9f," % t + ",".join("%.17g" % v for v in Ps.ravel()) + "\n")
 
 
 def so3_log_np(R):
@@ -120,6 +136,22 @@ def checks(tmp):
             ok = rc == 1 and share < 50.0
         results.append((name, "" if ok else "exit %d, %.1f %% inside:\n%s" % (rc, share, text)))
         print("check_nees: %s: exit %d, %.1f %% of frames inside" % (name, rc, share))
+    # Runs with a smoother: its trajectory with its own covariance by default, the filter's with --trajectory filter.
+    # Consistent smoother covariances read consistent; 4x too small read inconsistent while the filter's, untouched,
+    # still read consistent (so the script pairs each trajectory with its own covariance).
+    for name, scale in (("smoother_consistent", 1.0), ("smoother_overconfident_4x", 0.25)):
+        dirs = []
+        for i in range(20):
+            d = os.path.join(tmp, "%s_%02d" % (name, i))
+            write_run(d, rng, 60, smoother_scale=scale)
+            dirs.append(d)
+        rc_s, text_s = run_script(dirs)
+        rc_f, text_f = run_script(dirs, ["--trajectory", "filter"])
+        ok = rc_f == 0 and inside_share(text_f) >= 90.0 and (
+            (rc_s == 0 and inside_share(text_s) >= 90.0) if scale == 1.0 else (rc_s == 1 and inside_share(text_s) < 50.0))
+        results.append((name, "" if ok else "smoother: exit %d\n%s\nfilter: exit %d\n%s" % (rc_s, text_s, rc_f, text_f)))
+        print("check_nees: %s: %.1f %% inside (smoother), %.1f %% (--trajectory filter)"
+              % (name, inside_share(text_s), inside_share(text_f)))
     # A run in the frame of a calibration 10 mrad and 1 mm off the optical one: consistent there, so consistent
     # with --calibrated-frame and not without it; a missing truth.yaml is a clear error.
     E = (exp_so3(np.array([0.006, -0.008, 0.002])), np.array([0.0004, -0.0003, 0.0009]))

@@ -105,6 +105,10 @@ void writeStateCsv(const std::string& path, const std::vector<StateRow>& rows);
 /** @brief rig_covariance.csv: a '# variables:' comment naming the rig error-state variables, a header
  *  "t,P_0_0,P_0_1,...", then one row per frame: t and the rig covariance, row-major (SI: m, rad, s). */
 void writeRigCovarianceCsv(const std::string& path, const std::vector<StateRow>& rows);
+/** @brief smoother_covariance.csv: as rig_covariance.csv with the 6 variables px py pz thx thy thz, one row per
+ *  pose of `trajectory` (the smoother's marginal covariances). */
+void writePoseCovarianceCsv(const std::string& path, const std::vector<StampedPose>& trajectory,
+                            const std::vector<Eigen::Matrix<double, 6, 6>>& covariance);
 /** @brief sphere_fit.yaml: centre (m), radius and residuals (mm), inliers. */
 void writeSphereFit(const std::string& path, const geometry::SphereFit& fit);
 /** @brief Everything a run leaves behind (what writeResults writes). */
@@ -122,10 +126,14 @@ struct RunRecord {
   double ate_max_dt = 0.01;  //!< s, the time association tolerance of the ATE
   bool fit_sphere = true;                     //!< robust sphere fit of the map -> sphere_fit.yaml
   std::vector<std::pair<std::string, std::string>> info;  //!< extra summary lines (key, value as text)
-  /** The smoother's gyro bias at the last frame, rad/s, with its std (summary.yaml smoother_final_gyro_bias);
-   *  written when `smoother_bias_valid`. */
+  /** The smoother's gyro bias at the last frame, rad/s, with its std (summary.yaml smoother_final_gyro_bias), and
+   *  its mean over the recording (smoother_mean_gyro_bias); written when `smoother_bias_valid`. */
   bool smoother_bias_valid = false;
   Eigen::Vector3d smoother_bias = Eigen::Vector3d::Zero(), smoother_bias_std = Eigen::Vector3d::Zero();
+  Eigen::Vector3d smoother_mean_bias = Eigen::Vector3d::Zero(), smoother_mean_bias_std = Eigen::Vector3d::Zero();
+  /** The smoother's [p, theta] covariance per trajectory pose (smoother_covariance.csv); empty: no smoother run
+   *  (an older smoother_covariance.csv in the directory is removed). */
+  std::vector<Eigen::Matrix<double, 6, 6>> smoother_pose_covariance;
 };
 
 /**

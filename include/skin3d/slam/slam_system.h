@@ -70,7 +70,7 @@ struct SlamOptions {
   /** Back end run over the whole recording when the results are written (SlamRunner::save): "batch" smooths
    *  every frame's pose, the landmarks and the gyro bias together (smoother.h) and trajectory.tum is its
    *  trajectory (the filter's is kept as trajectory_filter.tum); "off" = the filter's. */
-  std::string smoother = "off";
+  std::string smoother = "batch";
   double smoother_huber = 2.80;     //!< Huber radius of a landmark residual, in sigmas (chi^2 3 dof 95 %)
   int smoother_iterations = 50;     //!< Levenberg-Marquardt iterations at most
   /** m: loop closure in the smoother (a landmark found again under a new id, within this distance of the old

@@ -74,6 +74,8 @@ struct GyroSample {
   Eigen::Matrix3d C = Eigen::Matrix3d::Zero();       //!< (rad/s)^2; zero = SmootherOptions::gyro_noise
 };
 
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
 struct SmootherResult {
   bool ok = false;
   std::string message;                  //!< what was solved, or why nothing was
@@ -81,8 +83,20 @@ struct SmootherResult {
   std::vector<Eigen::Quaterniond> q;
   std::vector<Eigen::Vector3d> gyro_bias;  //!< per frame, rad/s (the initial bias when not estimated)
   Eigen::Matrix3d final_bias_covariance = Eigen::Matrix3d::Zero();  //!< (rad/s)^2 at the last frame; zero if unknown
+  /** (rad/s)^2 of the mean of the per-frame biases over the recording (mean_bias()); zero if unknown. */
+  Eigen::Matrix3d mean_bias_covariance = Eigen::Matrix3d::Zero();
+  /** The per-frame biases' mean over the recording: what a constant bias is best compared with. */
+  Eigen::Vector3d mean_bias() const {
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    for (const auto& x : gyro_bias) m += x / static_cast<double>(gyro_bias.size());
+    return m;
+  }
+  /** Per frame, the marginal covariance of [p, theta] (m, rad; theta: R_true = Exp(theta) R, the world-frame
+   *  rotation error, as the filter's): from the solution's Gauss-Newton information (the poses, landmarks and
+   *  biases together). The first frame's is zero (it defines the world), as is any that could not be found. */
+  std::vector<Matrix6d> pose_covariance;
   int landmarks = 0, observations = 0, outliers = 0;
-  int loops = 0;                        //!< landmarks found again under a new id and joined (loop closure)  //!< outliers: residual beyond the Huber radius at the end
+  int loops = 0;                        //!< landmarks found again under a new id and joined (loop closure)
   int iterations = 0;
   double sigma0 = 1.0;                  //!< the landmark measurements' sigma factor used (1: not estimated)
   /** id, world (m), ascending id; an id joined to an earlier one by loop closure has that one's position. */

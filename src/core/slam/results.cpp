@@ -295,6 +295,27 @@ void writeRigCovarianceCsv(const std::string& path, const std::vector<StateRow>&
   close(f, path);
 }
 
+void writePoseCovarianceCsv(const std::string& path, const std::vector<StampedPose>& trajectory,
+                            const std::vector<Eigen::Matrix<double, 6, 6>>& covariance) {
+  if (covariance.size() != trajectory.size())
+    throw std::runtime_error("cannot write '" + path + "': " + std::to_string(covariance.size()) + " covariances for " +
+                             std::to_string(trajectory.size()) + " poses");
+  auto f = open(path);
+  f << "# skin3d smoother pose covariance per frame, row-major (m, rad; theta: R_true = Exp(theta) R); variables: px py "
+       "pz thx thy thz\nt";
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) f << ",P_" << i << '_' << j;
+  f << '\n';
+  f.precision(7);
+  for (std::size_t k = 0; k < trajectory.size(); ++k) {
+    f << stampText(trajectory[k].t);
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j) f << ',' << covariance[k](i, j);
+    f << '\n';
+  }
+  close(f, path);
+}
+
 void writeSphereFit(const std::string& path, const geometry::SphereFit& fit) {
   YAML::Emitter y;
   y << YAML::BeginMap;
@@ -323,17 +344,22 @@ std::string writeResults(const std::string& dir, const RunRecord& run) {
   writeMapCovarianceCsv(dir + "/map_covariance.csv", run.map);
   writeStateCsv(dir + "/state.csv", run.rows);
   writeRigCovarianceCsv(dir + "/rig_covariance.csv", run.rows);
+  if (!run.smoother_pose_covariance.empty())
+    writePoseCovarianceCsv(dir + "/smoother_covariance.csv", run.trajectory, run.smoother_pose_covariance);
+  else
+    std::remove((dir + "/smoother_covariance.csv").c_str());  // an earlier run's
   if (!run.ground_truth.empty()) writeTum(dir + "/ground_truth.tum", run.ground_truth);
   YAML::Emitter y;
   y << YAML::BeginMap;
   for (const auto& kv : run.info) y << YAML::Key << kv.first << YAML::Value << kv.second;
+  auto bias = [&y](const char* key, const Eigen::Vector3d& b, const Eigen::Vector3d& std) {
+    y << YAML::Key << key << YAML::Value << YAML::BeginMap << YAML::Key << "rad_s" << YAML::Value << YAML::Flow
+      << YAML::BeginSeq << b[0] << b[1] << b[2] << YAML::EndSeq << YAML::Key << "std_rad_s" << YAML::Value << YAML::Flow
+      << YAML::BeginSeq << std[0] << std[1] << std[2] << YAML::EndSeq << YAML::EndMap;
+  };
   if (run.smoother_bias_valid) {
-    y << YAML::Key << "smoother_final_gyro_bias" << YAML::Value << YAML::BeginMap << YAML::Key << "rad_s" << YAML::Value
-      << YAML::Flow << YAML::BeginSeq;
-    for (int i = 0; i < 3; ++i) y << run.smoother_bias[i];
-    y << YAML::EndSeq << YAML::Key << "std_rad_s" << YAML::Value << YAML::Flow << YAML::BeginSeq;
-    for (int i = 0; i < 3; ++i) y << run.smoother_bias_std[i];
-    y << YAML::EndSeq << YAML::EndMap;
+    bias("smoother_final_gyro_bias", run.smoother_bias, run.smoother_bias_std);
+    bias("smoother_mean_gyro_bias", run.smoother_mean_bias, run.smoother_mean_bias_std);
   }
   y << YAML::Key << "frames" << YAML::Value << run.trajectory.size();
   y << YAML::Key << "landmarks_in_map" << YAML::Value << run.map.size();

@@ -146,23 +146,32 @@ struct MotionCost {
   double dt1_, dt2_, w_;
 };
 
-// The last frame's bias covariance: the Gauss-Newton information J^T J of every free block (the robust loss's
-// weights applied, the first pose held), factored sparsely (LDLT, AMD ordering), solved for the bias's three
-// columns. Zero when the information is singular.
-Eigen::Matrix3d lastBiasCovariance(ceres::Problem& problem, std::map<std::int64_t, Eigen::Vector3d>& m,
-                                   std::vector<Eigen::Vector4d>& q, std::vector<Eigen::Vector3d>& p,
-                                   std::vector<Eigen::Vector3d>& b, int threads) {
+// The marginal covariances of the solution, from J^T J of the whitened (and robustified) residuals at it, the
+// landmarks, the poses after the first (held fixed: it defines the world) and the estimated biases its
+// variables: a sparse LDL^T (AMD ordering) solved for the columns of each pose and of the last bias, a few
+// frames at a time. Poses come out as [p, theta] (m, rad; theta the world-frame rotation error: the manifold
+// perturbs on the left); zero where the factorisation failed or a block is not positive definite.
+void marginalCovariances(ceres::Problem& problem, std::map<std::int64_t, Eigen::Vector3d>& m,
+                         std::vector<Eigen::Vector4d>& q, std::vector<Eigen::Vector3d>& p,
+                         std::vector<Eigen::Vector3d>* b, int threads, std::vector<Matrix6d>* poses,
+                         Eigen::Matrix3d* last_bias, Eigen::Matrix3d* mean_bias) {
+  const std::size_t n = q.size();
+  poses->assign(n, Matrix6d::Zero());
+  last_bias->setZero();
+  mean_bias->setZero();
   ceres::Problem::EvaluateOptions eo;
   for (auto& kv : m) eo.parameter_blocks.push_back(kv.second.data());
-  for (std::size_t k = 1; k < q.size(); ++k) {
-    eo.parameter_blocks.push_back(q[k].data());
+  const int first_pose = 3 * static_cast<int>(m.size());
+  for (std::size_t k = 1; k < n; ++k) {
+    eo.parameter_blocks.push_back(q[k].data());  // columns first_pose + 6 (k - 1): theta, then p
     eo.parameter_blocks.push_back(p[k].data());
   }
-  for (auto& x : b) eo.parameter_blocks.push_back(x.data());  // the last bias: the last 3 columns
+  if (b)
+    for (auto& x : *b) eo.parameter_blocks.push_back(x.data());  // the last bias: the last 3 columns
   eo.num_threads = threads;
   ceres::CRSMatrix J;
   double cost = 0;
-  if (!problem.Evaluate(eo, &cost, nullptr, nullptr, &J)) return Eigen::Matrix3d::Zero();
+  if (!problem.Evaluate(eo, &cost, nullptr, nullptr, &J)) return;
   std::vector<Eigen::Triplet<double>> t;
   t.reserve(J.values.size());
   for (int r = 0; r < J.num_rows; ++r)
@@ -171,15 +180,42 @@ Eigen::Matrix3d lastBiasCovariance(ceres::Problem& problem, std::map<std::int64_
   Js.setFromTriplets(t.begin(), t.end());
   const Eigen::SparseMatrix<double> H = Eigen::SparseMatrix<double>(Js.transpose()) * Js;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H);
-  if (ldlt.info() != Eigen::Success) return Eigen::Matrix3d::Zero();
-  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(J.num_cols, 3);
-  for (int i = 0; i < 3; ++i) E(J.num_cols - 3 + i, i) = 1.0;
-  const Eigen::MatrixXd X = ldlt.solve(E);
-  if (ldlt.info() != Eigen::Success || !X.allFinite()) return Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d C = X.bottomRows(3);
-  C = 0.5 * (C + C.transpose());
-  if (Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvalues().minCoeff() <= 0) return Eigen::Matrix3d::Zero();
-  return C;
+  if (ldlt.info() != Eigen::Success) return;
+  auto positive = [](const Eigen::MatrixXd& C) {
+    return C.allFinite() && Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(C).eigenvalues().minCoeff() > 0;
+  };
+  if (b) {  // the last bias (columns 0-2) and the mean of all (3-5): a^T H^-1 a, a the averaging vector
+    const int nb = static_cast<int>(b->size()), b0 = J.num_cols - 3 * nb;
+    Eigen::MatrixXd E = Eigen::MatrixXd::Zero(J.num_cols, 6);
+    for (int i = 0; i < 3; ++i) {
+      E(J.num_cols - 3 + i, i) = 1.0;
+      for (int k = 0; k < nb; ++k) E(b0 + 3 * k + i, 3 + i) = 1.0 / nb;
+    }
+    const Eigen::MatrixXd X = ldlt.solve(E);
+    Eigen::Matrix3d C = X.bottomLeftCorner(3, 3), M = E.rightCols(3).transpose() * X.rightCols(3);
+    C = 0.5 * (C + C.transpose());
+    M = 0.5 * (M + M.transpose());
+    if (ldlt.info() == Eigen::Success && positive(C)) *last_bias = C;
+    if (ldlt.info() == Eigen::Success && positive(M)) *mean_bias = M;
+  }
+  const int chunk = 8;  // frames per solve: 48 right-hand sides
+  for (std::size_t k0 = 1; k0 < n; k0 += chunk) {
+    const int frames = static_cast<int>(std::min<std::size_t>(chunk, n - k0));
+    Eigen::MatrixXd E = Eigen::MatrixXd::Zero(J.num_cols, 6 * frames);
+    const int c0 = first_pose + 6 * static_cast<int>(k0 - 1);
+    for (int i = 0; i < 6 * frames; ++i) E(c0 + i, i) = 1.0;
+    const Eigen::MatrixXd X = ldlt.solve(E);
+    if (ldlt.info() != Eigen::Success) return;
+    for (int f = 0; f < frames; ++f) {
+      // [delta, p]: Ceres' quaternion tangent delta is half the rotation vector (Plus(q, delta) = [cos|delta|,
+      // sin|delta| delta / |delta|] q), theta = 2 delta
+      const Eigen::Matrix<double, 6, 6> B = X.block<6, 6>(c0 + 6 * f, 6 * f);
+      Matrix6d C;
+      C << B.block<3, 3>(3, 3), 2.0 * B.block<3, 3>(3, 0), 2.0 * B.block<3, 3>(0, 3), 4.0 * B.block<3, 3>(0, 0);
+      C = 0.5 * (C + C.transpose());
+      if (positive(C)) (*poses)[k0 + f] = C;
+    }
+  }
 }
 
 }  // namespace
@@ -273,7 +309,8 @@ double varianceFactor(ceres::Problem& problem, const std::vector<std::pair<ceres
 // One solve of the batch problem. bias_start: per-frame starting biases (empty: the options' initial bias);
 // sigma0 > 0: the measurements' sigma factor, known (else estimated from a first solution and solved again).
 SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
-                         const SmootherOptions& o, const std::vector<Eigen::Vector3d>& bias_start, double sigma0) {
+                         const SmootherOptions& o, const std::vector<Eigen::Vector3d>& bias_start, double sigma0,
+                         bool covariances) {
   const auto t_start = std::chrono::steady_clock::now();
   SmootherResult res;
   const std::size_t n = frames.size();
@@ -400,7 +437,9 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
   }
   // the last bias's covariance
   t0 = now();
-  if (!gyro.empty() && o.estimate_gyro_bias) res.final_bias_covariance = lastBiasCovariance(problem, m, q, p, b, o.threads);
+  if (covariances)
+    marginalCovariances(problem, m, q, p, !gyro.empty() && o.estimate_gyro_bias ? &b : nullptr, o.threads,
+                        &res.pose_covariance, &res.final_bias_covariance, &res.mean_bias_covariance);
   res.covariance_seconds = secs(t0, now());
   res.p = p;
   res.q.resize(n);
@@ -414,7 +453,7 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
                 " beyond the Huber radius), " + std::to_string(gyro_factors) + " gyro factors; " +
                 std::to_string(res.iterations) + " iterations, cost " + std::to_string(summary.initial_cost) +
                 " -> " + std::to_string(summary.final_cost) + ", measurement sigma factor " + std::to_string(res.sigma0) +
-                "; solved in " + std::to_string(res.solve_seconds) + " s, bias covariance in " +
+                "; solved in " + std::to_string(res.solve_seconds) + " s, covariances in " +
                 std::to_string(res.covariance_seconds) + " s";
   return res;
 }
@@ -503,20 +542,27 @@ int closeLoops(const SmootherResult& r, std::vector<SmootherFrame>* frames, cons
 SmootherResult smooth(const std::vector<SmootherFrame>& frames, const std::vector<GyroSample>& gyro,
                       const SmootherOptions& o) {
   o.validate();
-  SmootherResult r = solveOnce(frames, gyro, o, {}, 0.0);
-  if (!r.ok || !(o.loop_radius > 0)) return r;
+  const bool loops = o.loop_radius > 0;
+  SmootherResult r = solveOnce(frames, gyro, o, {}, 0.0, !loops);  // the covariances of the final solve only
+  if (!r.ok || !loops) return r;
   std::vector<SmootherFrame> again = frames;
   std::map<std::int64_t, std::int64_t> joined;
   const int merged = closeLoops(r, &again, o, &joined);
-  if (merged == 0) {
-    r.message += "; no landmark found again";
-    return r;
-  }
   for (std::size_t k = 0; k < again.size(); ++k) {
     again[k].p = r.p[k];
     again[k].q = r.q[k];
   }
-  SmootherResult r2 = solveOnce(again, gyro, o, r.gyro_bias, r.sigma0);
+  if (merged == 0) {  // the same problem from its solution: a few iterations, then the covariances
+    SmootherResult r2 = solveOnce(again, gyro, o, r.gyro_bias, r.sigma0, true);
+    if (!r2.ok) return r;
+    r2.sigma0 = r.sigma0;
+    r2.seconds += r.seconds;
+    r2.solve_seconds += r.solve_seconds;
+    r2.iterations += r.iterations;
+    r2.message += "; no landmark found again, sigma factor from the first solve";
+    return r2;
+  }
+  SmootherResult r2 = solveOnce(again, gyro, o, r.gyro_bias, r.sigma0, true);
   if (!r2.ok) {
     r.message += "; the solve with " + std::to_string(merged) + " landmarks found again failed (" + r2.message + ")";
     return r;

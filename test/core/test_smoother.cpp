@@ -334,10 +334,12 @@ TEST(Smoother, BadInputIsNamed) {
 // The option: off, batch, and rosparam's reading of an unquoted off (the boolean false); anything else is named.
 TEST(Smoother, TheOptionTakesOffOrBatch) {
   skin3d::slam::SlamOptions o;
+  EXPECT_EQ(o.smoother, "batch");  // the default
+  skin3d::slam::setSlamOption(&o, "smoother", "off");
   EXPECT_EQ(o.smoother, "off");
   skin3d::slam::setSlamOption(&o, "smoother", "batch");
   EXPECT_EQ(o.smoother, "batch");
-  skin3d::slam::setSlamOption(&o, "smoother", "false");
+  skin3d::slam::setSlamOption(&o, "smoother", "false");  // rosparam reads an unquoted off as false
   EXPECT_EQ(o.smoother, "off");
   try {
     skin3d::slam::setSlamOption(&o, "smoother", "sliding");

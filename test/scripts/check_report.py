@@ -12,7 +12,8 @@ generator's truth (never against the plotting code's own output):
   parameters.yaml is listed;
 - the reference velocities the plots derive from the ground-truth poses agree with the generator's constant
   rig velocities (truth.yaml), i.e. the rotation conventions of the plots are right;
-- the filter's 3-sigma bounds drawn in Fig. 7.1 come from rig_covariance.csv and contain most of the errors;
+- the 3-sigma bounds drawn in Fig. 7.1 (the smoother's from smoother_covariance.csv when it wrote trajectory.tum, else the
+  filter's from rig_covariance.csv) contain most of the errors;
 - the workpiece table matches the truth's plateaus.
 """
 import re
@@ -62,9 +63,12 @@ def main(html_path, d2, d3, dind):
         rows = np.array([p[5] for p in pr])[5:]
         ep = np.array([p[3] - p[1] for p in pr])[5:]
         eth = np.array([sp.so3_log(p[4] @ p[2].T) for p in pr])[5:]
-        sd = np.sqrt(np.array([np.diag(r.cov[k])[:6] for k in rows]))
+        # trajectory.tum's own covariance: the smoother's (smoother_covariance.csv) when it wrote it, else the filter's
+        cov, who = (r.pose_cov, "smoother's") if r.pose_cov is not None else (r.cov, "filter's")
+        check(len(cov) == len(r.traj), "%s: the %s covariance has one matrix per pose" % (r.name, who))
+        sd = np.sqrt(np.array([np.diag(cov[k])[:6] for k in rows]))
         inside = np.mean(np.abs(np.c_[ep, eth]) <= 3 * sd)
-        check(inside > 0.9, "%s: %.1f %% of the pose error components inside the filter's 3 sigma" % (r.name, 100 * inside))
+        check(inside > 0.9, "%s: %.1f %% of the pose error components inside the %s 3 sigma" % (r.name, 100 * inside, who))
     c2 = sp.SlamRun(d2)
     check("experiment 2" in c2.kind() and "experiment 3" in sp.SlamRun(d3).kind(), "runs classified as experiments 2 and 3")
     # induration

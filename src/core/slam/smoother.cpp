@@ -198,18 +198,24 @@ void marginalCovariances(ceres::Problem& problem, std::map<std::int64_t, Eigen::
     if (ldlt.info() == Eigen::Success && positive(C)) *last_bias = C;
     if (ldlt.info() == Eigen::Success && positive(M)) *mean_bias = M;
   }
-  const int chunk = 8;  // frames per solve: 48 right-hand sides
+  // A pose's block of H^-1 = P^T L^-T D^-1 L^-1 P is Y^T D^-1 Y with Y = L^-1 P E (E its 6 unit columns): the
+  // forward substitution alone, which skips the zeros of the right-hand side (the poses come late in the
+  // elimination order, so Y is short), instead of a whole solve
+  const Eigen::VectorXd Dinv = ldlt.vectorD().cwiseInverse();
+  const int chunk = 8;  // frames per substitution: 48 right-hand sides
   for (std::size_t k0 = 1; k0 < n; k0 += chunk) {
     const int frames = static_cast<int>(std::min<std::size_t>(chunk, n - k0));
     Eigen::MatrixXd E = Eigen::MatrixXd::Zero(J.num_cols, 6 * frames);
     const int c0 = first_pose + 6 * static_cast<int>(k0 - 1);
     for (int i = 0; i < 6 * frames; ++i) E(c0 + i, i) = 1.0;
-    const Eigen::MatrixXd X = ldlt.solve(E);
-    if (ldlt.info() != Eigen::Success) return;
+    Eigen::MatrixXd Y = ldlt.permutationP() * E;
+    ldlt.matrixL().solveInPlace(Y);
+    if (!Y.allFinite() || !Dinv.allFinite()) return;
     for (int f = 0; f < frames; ++f) {
+      const auto Yf = Y.middleCols(6 * f, 6);
+      const Eigen::Matrix<double, 6, 6> B = Yf.transpose() * Dinv.asDiagonal() * Yf;
       // [delta, p]: Ceres' quaternion tangent delta is half the rotation vector (Plus(q, delta) = [cos|delta|,
       // sin|delta| delta / |delta|] q), theta = 2 delta
-      const Eigen::Matrix<double, 6, 6> B = X.block<6, 6>(c0 + 6 * f, 6 * f);
       Matrix6d C;
       C << B.block<3, 3>(3, 3), 2.0 * B.block<3, 3>(3, 0), 2.0 * B.block<3, 3>(0, 3), 4.0 * B.block<3, 3>(0, 0);
       C = 0.5 * (C + C.transpose());

@@ -121,8 +121,8 @@ def main():
         sd = os.path.join(a.out, str(seed))
         os.makedirs(sd, exist_ok=True)
         bag = os.path.join(sd, "globe.bag")
-        todo = [(n, args) for n, args in runs if not os.path.exists(os.path.join(sd, n, "summary.yaml"))]
-        if todo and not os.path.exists(bag):
+        pending = [(n, args) for n, args in runs if not os.path.exists(os.path.join(sd, n, "summary.yaml"))]
+        if pending and not os.path.exists(bag):
             write_config(os.path.join(sd, "globe.yaml"), scene, a.realistic, a.frames_scale)
             cmd = [os.path.join(a.bin, "make_dataset"), "globe-images", "--config", os.path.join(sd, "globe.yaml"),
                    "--seed", str(seed), "--out", bag] + (["--ideal"] if a.ideal else [])
@@ -131,7 +131,7 @@ def main():
             if rc != 0:
                 table.append({"seed": seed, "scene": scene, "error": "render failed"})
                 continue
-        for name, args in todo:
+        for name, args in pending:
             cmd = [os.path.join(a.bin, "process_bag"), "--bag", bag, "--out", os.path.join(sd, name), "--quiet"] + args
             print("globe_sweep: seed %d: %s: %s" % (seed, name, " ".join(args)), flush=True)
             rc, sec = run(cmd, os.path.join(sd, name + ".log"))

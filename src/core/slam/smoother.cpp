@@ -148,8 +148,8 @@ struct MotionCost {
 
 // The marginal covariances of the solution, from J^T J of the whitened (and robustified) residuals at it, the
 // landmarks, the poses after the first (held fixed: it defines the world) and the estimated biases its
-// variables: a sparse LDL^T (AMD ordering) solved for the columns of each pose and of the last bias, a few
-// frames at a time. Poses come out as [p, theta] (m, rad; theta the world-frame rotation error: the manifold
+// variables: a sparse LDL^T (AMD ordering), solved for the bias columns and forward-substituted for each pose's, a
+// few frames at a time. Poses come out as [p, theta] (m, rad; theta the world-frame rotation error: the manifold
 // perturbs on the left); zero where the factorisation failed or a block is not positive definite.
 void marginalCovariances(ceres::Problem& problem, std::map<std::int64_t, Eigen::Vector3d>& m,
                          std::vector<Eigen::Vector4d>& q, std::vector<Eigen::Vector3d>& p,
@@ -441,7 +441,7 @@ SmootherResult solveOnce(const std::vector<SmootherFrame>& frames, const std::ve
     problem.EvaluateResidualBlock(lb.first, false, &cost, r, nullptr);
     if (std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) > o.huber) ++res.outliers;
   }
-  // the last bias's covariance
+  // the marginal covariances (poses, last and mean bias); only for the solve whose result is returned
   t0 = now();
   if (covariances)
     marginalCovariances(problem, m, q, p, !gyro.empty() && o.estimate_gyro_bias ? &b : nullptr, o.threads,
